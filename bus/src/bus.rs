@@ -1,0 +1,232 @@
+//! [`Bus`]: one process's handle on a domain (an iceoryx2 node), and the service QoS in one place.
+
+use std::rc::Rc;
+
+use iceoryx2::node::{Node, NodeBuilder};
+use iceoryx2::prelude::{
+    ipc, AttributeSpecifier, AttributeVerifier, MessagingPattern, Service as _,
+};
+use iceoryx2::service::port_factory::{event, publish_subscribe};
+use iceoryx2::service::service_name::ServiceName;
+use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
+use iceoryx2::service::ServiceDetails;
+
+use crate::abi::{StateSample, ABI_VERSION};
+use crate::domain::Domain;
+use crate::error::{BusError, Result};
+use crate::metadata::{self, ServiceKind, KEY_ABI, KEY_KIND};
+use crate::naming;
+
+/// Quality of service of every Conductor service. Owners create services with these values;
+/// clients open them without requirements, so the two never disagree.
+pub(crate) mod qos {
+    /// Processes that may attach to one service (executor, controllers, CLI, recorder, ...).
+    pub const MAX_NODES: usize = 32;
+    /// Publishers per state: the owner, plus one while a restarted owner replaces a dead one.
+    pub const STATE_PUBLISHERS: usize = 2;
+    /// Subscribers per state.
+    pub const STATE_SUBSCRIBERS: usize = 16;
+    /// Default per-subscriber queue depth of a state (samples kept for a slow reader).
+    pub const STATE_BUFFER: usize = 256;
+    /// Command senders per subsystem.
+    pub const COMMAND_PUBLISHERS: usize = 8;
+    /// Command receivers per subsystem (the executor and a recorder).
+    pub const COMMAND_SUBSCRIBERS: usize = 4;
+    /// Frames queued for the executor between two of its ticks.
+    pub const COMMAND_BUFFER: usize = 32;
+    /// Stats subscribers.
+    pub const STATS_SUBSCRIBERS: usize = 8;
+    /// Tick listeners.
+    pub const TICK_LISTENERS: usize = 32;
+}
+
+pub(crate) type StateService = publish_subscribe::PortFactory<ipc::Service, StateSample, ()>;
+pub(crate) type EventService = event::PortFactory<ipc::Service>;
+
+struct Inner {
+    domain: Domain,
+    node: Node<ipc::Service>,
+}
+
+/// A process's connection to one [`Domain`]: an iceoryx2 node from which every publisher,
+/// subscriber and controller is made. Cheap to clone; not `Send` (iceoryx2 ports are
+/// single-threaded), so each thread opens its own.
+#[derive(Clone)]
+pub struct Bus {
+    inner: Rc<Inner>,
+}
+
+impl core::fmt::Debug for Bus {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Bus")
+            .field("domain", &self.inner.domain.name())
+            .finish()
+    }
+}
+
+impl Bus {
+    /// Joins `domain` as a node called `node_name` (shown by `iox2 node list`).
+    pub fn open(domain: &Domain, node_name: &str) -> Result<Self> {
+        let name = node_name
+            .try_into()
+            .map_err(|e| BusError::iox(format!("node name {node_name:?}"), e))?;
+        let node = NodeBuilder::new()
+            .name(&name)
+            .config(domain.iceoryx2_config())
+            .create::<ipc::Service>()
+            .map_err(|e| BusError::iox(format!("joining domain {:?}", domain.name()), e))?;
+        Ok(Self {
+            inner: Rc::new(Inner {
+                domain: domain.clone(),
+                node,
+            }),
+        })
+    }
+
+    /// Joins the domain named by `CONDUCTOR_DOMAIN`.
+    pub fn from_env(node_name: &str) -> Result<Self> {
+        Self::open(&Domain::from_env()?, node_name)
+    }
+
+    /// The domain this bus is attached to.
+    pub fn domain(&self) -> &Domain {
+        &self.inner.domain
+    }
+
+    pub(crate) fn node(&self) -> &Node<ipc::Service> {
+        &self.inner.node
+    }
+
+    pub(crate) fn service_name(name: &str) -> Result<ServiceName> {
+        name.try_into()
+            .map_err(|e| BusError::iox(format!("service name {name:?}"), e))
+    }
+
+    /// Static details of a service, if it exists.
+    pub(crate) fn details(
+        &self,
+        name: &str,
+        pattern: MessagingPattern,
+    ) -> Result<Option<ServiceDetails<ipc::Service>>> {
+        ipc::Service::details(
+            &Self::service_name(name)?,
+            self.domain().iceoryx2_config(),
+            pattern,
+        )
+        .map_err(|e| BusError::iox(format!("reading service {name:?}"), e))
+    }
+
+    /// Checks that an existing service is a Conductor service of `kind` speaking our ABI.
+    pub(crate) fn check_conductor_service(
+        &self,
+        name: &str,
+        details: &ServiceDetails<ipc::Service>,
+        kind: ServiceKind,
+        type_name: &str,
+    ) -> Result<()> {
+        let attrs = details.static_details.attributes();
+        let abi = metadata::get(attrs, KEY_ABI);
+        let found_kind = metadata::get(attrs, KEY_KIND);
+        let found_type = match details.static_details.messaging_pattern() {
+            StaticPattern::PublishSubscribe(_) => details
+                .static_details
+                .publish_subscribe()
+                .message_type_details()
+                .payload
+                .type_name()
+                .to_string(),
+            _ => String::new(),
+        };
+        match abi {
+            None => {
+                return Err(BusError::WrongServiceType {
+                    service: name.into(),
+                    expected: format!("{} ({type_name})", kind.as_str()),
+                    found: if found_type.is_empty() {
+                        "a service without Conductor attributes".into()
+                    } else {
+                        format!("a foreign service with payload type {found_type:?}")
+                    },
+                })
+            }
+            Some(v) if v != ABI_VERSION.to_string() => {
+                return Err(BusError::AbiMismatch {
+                    service: name.into(),
+                    found: v,
+                    expected: ABI_VERSION,
+                })
+            }
+            Some(_) => {}
+        }
+        if found_kind.as_deref() != Some(kind.as_str()) {
+            return Err(BusError::WrongServiceType {
+                service: name.into(),
+                expected: kind.as_str().into(),
+                found: format!("kind {:?}", found_kind.unwrap_or_default()),
+            });
+        }
+        if !type_name.is_empty() && found_type != type_name {
+            return Err(BusError::WrongServiceType {
+                service: name.into(),
+                expected: format!("payload {type_name}"),
+                found: format!("payload {found_type:?}"),
+            });
+        }
+        Ok(())
+    }
+
+    /// Creates `name` with `attrs`, or opens it if a (restarted) owner finds it still held open
+    /// by clients; opening then requires the same attributes.
+    pub(crate) fn create_or_reopen_pubsub<T>(
+        &self,
+        name: &str,
+        attrs: &AttributeSpecifier,
+        configure: impl Fn(
+            iceoryx2::service::builder::publish_subscribe::Builder<T, (), ipc::Service>,
+        ) -> iceoryx2::service::builder::publish_subscribe::Builder<
+            T,
+            (),
+            ipc::Service,
+        >,
+    ) -> Result<publish_subscribe::PortFactory<ipc::Service, T, ()>>
+    where
+        T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + 'static,
+    {
+        use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as CE;
+        let sname = Self::service_name(name)?;
+        let builder = || configure(self.node().service_builder(&sname).publish_subscribe::<T>());
+        match builder().create_with_attributes(attrs) {
+            Ok(f) => Ok(f),
+            Err(CE::AlreadyExists) | Err(CE::IsBeingCreatedByAnotherInstance) => builder()
+                .open_with_attributes(&verifier(attrs)?)
+                .map_err(|e| BusError::iox(format!("re-opening {name:?} as its owner"), e)),
+            Err(e) => Err(BusError::iox(format!("creating {name:?}"), e)),
+        }
+    }
+
+    /// Opens (or creates) the tick event of `subsystem`.
+    pub(crate) fn tick_event(&self, subsystem: &str) -> Result<EventService> {
+        let name = naming::tick(subsystem);
+        self.node()
+            .service_builder(&Self::service_name(&name)?)
+            .event()
+            .max_listeners(qos::TICK_LISTENERS)
+            .max_notifiers(2)
+            .max_nodes(qos::MAX_NODES)
+            .open_or_create_with_attributes(&verifier(&metadata::base_attributes(
+                ServiceKind::Tick,
+            )?)?)
+            .map_err(|e| BusError::iox(format!("opening tick event {name:?}"), e))
+    }
+}
+
+/// An attribute verifier that requires every key/value of `spec`.
+fn verifier(spec: &AttributeSpecifier) -> Result<AttributeVerifier> {
+    let mut v = AttributeVerifier::new();
+    for a in spec.attributes().iter() {
+        v = v
+            .require(a.key(), a.value())
+            .map_err(|e| BusError::iox("attribute verifier", e))?;
+    }
+    Ok(v)
+}

@@ -1,0 +1,216 @@
+//! [`Controller`]: the thesis' controller API over the bus: `add_ctrl`, `send_ctrl`,
+//! `check_ctrl`, `get_surface`.
+
+use std::collections::HashMap;
+
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::prelude::{ipc, MessagingPattern, ZeroCopySend};
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+
+use crate::abi::{CommandFrame, MAX_SETPOINTS};
+use crate::bus::Bus;
+use crate::clock::monotonic_ns;
+use crate::error::{BusError, Result};
+use crate::metadata::{ServiceKind, StateMeta};
+use crate::naming;
+use crate::state::State;
+
+/// Default history kept for states read through [`Controller::get_surface`].
+pub const SURFACE_HISTORY: usize = 256;
+
+struct Target {
+    outbox: usize,
+    index: u32,
+    meta: StateMeta,
+}
+
+struct Outbox {
+    subsystem: String,
+    port: Publisher<ipc::Service, CommandFrame, ()>,
+    frame: CommandFrame,
+    seq: u64,
+    _service: PortFactory<ipc::Service, CommandFrame, ()>,
+}
+
+/// Buffers setpoints and sends them as one [`CommandFrame`] per subsystem, which the owning
+/// executor applies in a single tick; reads states on demand.
+///
+/// Resolving a state name the first time looks it up on the bus (allocates); after that,
+/// `add_ctrl`/`send_ctrl` on known names only write into pre-allocated frames.
+pub struct Controller {
+    bus: Bus,
+    targets: HashMap<String, Target>,
+    outboxes: Vec<Outbox>,
+    surfaces: HashMap<String, State>,
+}
+
+impl core::fmt::Debug for Controller {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Controller")
+            .field("targets", &self.targets.len())
+            .field("subsystems", &self.outboxes.len())
+            .finish()
+    }
+}
+
+impl Controller {
+    /// A controller on `bus`.
+    pub fn new(bus: &Bus) -> Self {
+        Self {
+            bus: bus.clone(),
+            targets: HashMap::new(),
+            outboxes: Vec::new(),
+            surfaces: HashMap::new(),
+        }
+    }
+
+    fn target(&mut self, name: &str) -> Result<&Target> {
+        if !self.targets.contains_key(name) {
+            let info = self.bus.resolve(name)?;
+            let outbox = match self
+                .outboxes
+                .iter()
+                .position(|o| o.subsystem == info.subsystem)
+            {
+                Some(i) => i,
+                None => {
+                    self.outboxes.push(open_outbox(&self.bus, &info.subsystem)?);
+                    self.outboxes.len() - 1
+                }
+            };
+            self.targets.insert(
+                name.to_string(),
+                Target {
+                    outbox,
+                    index: info.meta.index,
+                    meta: info.meta,
+                },
+            );
+        }
+        Ok(&self.targets[name])
+    }
+
+    /// Buffers a setpoint of `value` for state `name` (`subsystem/state` or a unique bare
+    /// name). A second setpoint for the same state before `send_ctrl` replaces the first.
+    pub fn add_ctrl(&mut self, name: &str, value: f64) -> Result<()> {
+        if !value.is_finite() {
+            return Err(BusError::NotFinite {
+                name: name.into(),
+                value,
+            });
+        }
+        let t = self.target(name)?;
+        if !t.meta.writable {
+            return Err(BusError::ReadOnly { name: name.into() });
+        }
+        let (outbox, index) = (t.outbox, t.index);
+        let ob = &mut self.outboxes[outbox];
+        let n = ob.frame.count as usize;
+        if let Some(sp) = ob.frame.entries[..n].iter_mut().find(|s| s.index == index) {
+            sp.value = value;
+            return Ok(());
+        }
+        if !ob.frame.push(index, value) {
+            return Err(BusError::FrameFull {
+                subsystem: ob.subsystem.clone(),
+                capacity: MAX_SETPOINTS,
+            });
+        }
+        Ok(())
+    }
+
+    /// The setpoint buffered for `name`, if any.
+    pub fn check_ctrl(&self, name: &str) -> Option<f64> {
+        let t = self.targets.get(name)?;
+        self.outboxes[t.outbox]
+            .frame
+            .setpoints()
+            .iter()
+            .find(|s| s.index == t.index)
+            .map(|s| s.value)
+    }
+
+    /// Sends every buffered setpoint: one frame per subsystem. Returns the number of setpoints
+    /// sent; the buffer is empty afterwards.
+    pub fn send_ctrl(&mut self) -> Result<usize> {
+        let mut sent = 0;
+        for ob in &mut self.outboxes {
+            if ob.frame.count == 0 {
+                continue;
+            }
+            ob.seq += 1;
+            ob.frame.seq = ob.seq;
+            ob.frame.t_send_ns = monotonic_ns();
+            let sample = ob
+                .port
+                .loan_uninit()
+                .map_err(|e| BusError::iox("loaning a command frame", e))?;
+            sample
+                .write_payload(ob.frame)
+                .send()
+                .map_err(|e| BusError::iox("sending a command frame", e))?;
+            sent += ob.frame.count as usize;
+            ob.frame.clear();
+        }
+        Ok(sent)
+    }
+
+    /// Drops every buffered setpoint without sending.
+    pub fn clear_ctrl(&mut self) {
+        for ob in &mut self.outboxes {
+            ob.frame.clear();
+        }
+    }
+
+    /// The state `name`, subscribed on first use and updated with every queued sample.
+    pub fn state(&mut self, name: &str) -> Result<&mut State> {
+        if !self.surfaces.contains_key(name) {
+            let s = State::new(&self.bus, name, SURFACE_HISTORY)?;
+            self.surfaces.insert(name.to_string(), s);
+        }
+        let s = self.surfaces.get_mut(name).expect("inserted above");
+        s.update()?;
+        Ok(s)
+    }
+
+    /// The last known value of `name` (the thesis' `getSurface`).
+    pub fn get_surface(&mut self, name: &str) -> Result<f64> {
+        self.state(name)?.value()
+    }
+
+    /// The bus this controller talks on.
+    pub fn bus(&self) -> &Bus {
+        &self.bus
+    }
+}
+
+fn open_outbox(bus: &Bus, subsystem: &str) -> Result<Outbox> {
+    let name = naming::commands(subsystem);
+    let Some(details) = bus.details(&name, MessagingPattern::PublishSubscribe)? else {
+        return Err(BusError::UnknownSubsystem {
+            name: subsystem.into(),
+            domain: bus.domain().name().into(),
+            service: name,
+        });
+    };
+    // SAFETY: type_name() has no preconditions.
+    let tn = unsafe { CommandFrame::type_name() };
+    bus.check_conductor_service(&name, &details, ServiceKind::Commands, tn)?;
+    let service = bus
+        .node()
+        .service_builder(&Bus::service_name(&name)?)
+        .publish_subscribe::<CommandFrame>()
+        .open()
+        .map_err(|e| BusError::iox(format!("opening {name:?}"), e))?;
+    let port = service
+        .publisher_builder()
+        .create()
+        .map_err(|e| BusError::iox(format!("command publisher on {name:?}"), e))?;
+    Ok(Outbox {
+        subsystem: subsystem.into(),
+        port,
+        frame: CommandFrame::default(),
+        seq: 0,
+        _service: service,
+    })
+}

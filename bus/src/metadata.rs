@@ -1,0 +1,210 @@
+//! State metadata carried as iceoryx2 service attributes, so any client can discover it.
+//!
+//! iceoryx2 allows 8 attributes per service; a state uses all of them:
+//!
+//! | key | value |
+//! |---|---|
+//! | `conductor.abi` | [`crate::ABI_VERSION`] in decimal |
+//! | `conductor.kind` | `state`, `commands`, `tick` or `stats` |
+//! | `conductor.index` | index of the state within its subsystem (the setpoint address) |
+//! | `conductor.units` | SI-style unit string, e.g. `rad`, `A`, `V` (may be empty) |
+//! | `conductor.writable` | `true` or `false` |
+//! | `conductor.rate_hz` | publish rate in Hz |
+//! | `conductor.limits` | `min,max` (either may be `-inf`/`inf`) |
+//! | `conductor.device` | the device the state belongs to (may be empty) |
+
+use iceoryx2::prelude::{AttributeSet, AttributeSpecifier};
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+
+use crate::abi::ABI_VERSION;
+use crate::error::{BusError, Result};
+
+/// Attribute key of the ABI version.
+pub const KEY_ABI: &str = "conductor.abi";
+/// Attribute key of the service kind.
+pub const KEY_KIND: &str = "conductor.kind";
+/// Attribute key of the state index.
+pub const KEY_INDEX: &str = "conductor.index";
+/// Attribute key of the units.
+pub const KEY_UNITS: &str = "conductor.units";
+/// Attribute key of the writable flag.
+pub const KEY_WRITABLE: &str = "conductor.writable";
+/// Attribute key of the rate.
+pub const KEY_RATE: &str = "conductor.rate_hz";
+/// Attribute key of the limits.
+pub const KEY_LIMITS: &str = "conductor.limits";
+/// Attribute key of the device.
+pub const KEY_DEVICE: &str = "conductor.device";
+
+/// What a Conductor service is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ServiceKind {
+    /// Pub/sub of `StateSample`.
+    State,
+    /// Pub/sub of `CommandFrame`.
+    Commands,
+    /// Event, notified once per state-stage tick.
+    Tick,
+    /// Pub/sub of `ExecutorStats`.
+    Stats,
+}
+
+impl ServiceKind {
+    /// The attribute value.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ServiceKind::State => "state",
+            ServiceKind::Commands => "commands",
+            ServiceKind::Tick => "tick",
+            ServiceKind::Stats => "stats",
+        }
+    }
+}
+
+/// Everything a client needs to know about a state besides its name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateMeta {
+    /// Index within the subsystem; setpoints address the state by it.
+    pub index: u32,
+    /// Units, e.g. `rad`.
+    pub units: String,
+    /// Whether the state accepts setpoints.
+    pub writable: bool,
+    /// Publish rate (Hz).
+    pub rate_hz: f64,
+    /// Lower limit for setpoints (setpoints below are clamped and flagged).
+    pub min: f64,
+    /// Upper limit for setpoints.
+    pub max: f64,
+    /// Owning device, for display.
+    pub device: String,
+}
+
+impl Default for StateMeta {
+    fn default() -> Self {
+        Self {
+            index: 0,
+            units: String::new(),
+            writable: false,
+            rate_hz: 0.0,
+            min: f64::NEG_INFINITY,
+            max: f64::INFINITY,
+            device: String::new(),
+        }
+    }
+}
+
+fn key(k: &str) -> Result<AttributeKey> {
+    k.try_into().map_err(|e| BusError::iox("attribute key", e))
+}
+
+fn value(v: &str) -> Result<AttributeValue> {
+    v.try_into()
+        .map_err(|e| BusError::iox(format!("attribute value {v:?}"), e))
+}
+
+fn define(spec: AttributeSpecifier, k: &str, v: &str) -> Result<AttributeSpecifier> {
+    spec.define(&key(k)?, &value(v)?)
+        .map_err(|e| BusError::iox("define attribute", e))
+}
+
+/// The attributes every Conductor service carries: ABI version and kind.
+pub(crate) fn base_attributes(kind: ServiceKind) -> Result<AttributeSpecifier> {
+    let spec = define(AttributeSpecifier::new(), KEY_ABI, &ABI_VERSION.to_string())?;
+    define(spec, KEY_KIND, kind.as_str())
+}
+
+fn fmt_limit(x: f64) -> String {
+    if x == f64::INFINITY {
+        "inf".into()
+    } else if x == f64::NEG_INFINITY {
+        "-inf".into()
+    } else {
+        format!("{x}")
+    }
+}
+
+impl StateMeta {
+    /// The full attribute set of a state service.
+    pub(crate) fn to_attributes(&self) -> Result<AttributeSpecifier> {
+        let mut spec = base_attributes(ServiceKind::State)?;
+        spec = define(spec, KEY_INDEX, &self.index.to_string())?;
+        spec = define(spec, KEY_UNITS, &self.units)?;
+        spec = define(
+            spec,
+            KEY_WRITABLE,
+            if self.writable { "true" } else { "false" },
+        )?;
+        spec = define(spec, KEY_RATE, &format!("{}", self.rate_hz))?;
+        spec = define(
+            spec,
+            KEY_LIMITS,
+            &format!("{},{}", fmt_limit(self.min), fmt_limit(self.max)),
+        )?;
+        define(spec, KEY_DEVICE, &self.device)
+    }
+
+    /// Reads the metadata back from a service's attributes; `None` if a required key is missing
+    /// or malformed (i.e. this is not a Conductor state service).
+    pub fn from_attributes(attrs: &AttributeSet) -> Option<Self> {
+        let limits = get(attrs, KEY_LIMITS)?;
+        let (min, max) = limits.split_once(',')?;
+        Some(Self {
+            index: get(attrs, KEY_INDEX)?.parse().ok()?,
+            units: get(attrs, KEY_UNITS).unwrap_or_default(),
+            writable: get(attrs, KEY_WRITABLE)? == "true",
+            rate_hz: get(attrs, KEY_RATE)?.parse().ok()?,
+            min: min.trim().parse().ok()?,
+            max: max.trim().parse().ok()?,
+            device: get(attrs, KEY_DEVICE).unwrap_or_default(),
+        })
+    }
+
+    /// Clamps `v` to the limits; returns the value and whether it was clamped.
+    pub fn clamp(&self, v: f64) -> (f64, bool) {
+        let c = v.clamp(self.min, self.max);
+        (c, c != v)
+    }
+}
+
+/// First value of attribute `k`, as a string.
+pub fn get(attrs: &AttributeSet, k: &str) -> Option<String> {
+    let k = key(k).ok()?;
+    attrs.key_value(&k, 0).map(|v| v.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn roundtrip_through_attributes() {
+        let m = StateMeta {
+            index: 3,
+            units: "rad".into(),
+            writable: true,
+            rate_hz: 250.0,
+            min: -2.6,
+            max: f64::INFINITY,
+            device: "dRAR".into(),
+        };
+        let spec = m.to_attributes().unwrap();
+        let attrs = spec.attributes();
+        assert_eq!(attrs.number_of_attributes(), 8);
+        assert_eq!(get(attrs, KEY_KIND).as_deref(), Some("state"));
+        assert_eq!(get(attrs, KEY_ABI).as_deref(), Some("1"));
+        assert_eq!(StateMeta::from_attributes(attrs), Some(m));
+    }
+
+    #[test]
+    fn clamp_flags() {
+        let m = StateMeta {
+            min: -1.0,
+            max: 1.0,
+            ..Default::default()
+        };
+        assert_eq!(m.clamp(0.5), (0.5, false));
+        assert_eq!(m.clamp(2.0), (1.0, true));
+        assert_eq!(m.clamp(-3.0), (-1.0, true));
+    }
+}

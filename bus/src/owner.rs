@@ -1,0 +1,287 @@
+//! The owner side, used by executors: publish states, notify ticks, drain commands, publish stats.
+//!
+//! Everything is created up front; the per-tick calls (`publish`, `notify_tick`, `drain`,
+//! `StatsPublisher::publish`) loan fixed-size samples from iceoryx2's pre-allocated shared
+//! memory and never allocate on the heap (checked by the counting-allocator test).
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::ipc;
+
+use crate::abi::{CommandFrame, ExecutorStats, StateSample};
+use crate::bus::{qos, Bus, EventService, StateService};
+use crate::clock::monotonic_ns;
+use crate::error::{BusError, Result};
+use crate::metadata::{base_attributes, ServiceKind, StateMeta};
+use crate::naming;
+
+/// Declaration of one state an executor owns.
+#[derive(Debug, Clone)]
+pub struct StateSpec {
+    /// State name (unique within the subsystem).
+    pub name: String,
+    /// Metadata published as service attributes. `meta.index` must equal the position of this
+    /// spec in the list given to [`StatePublisher::create`].
+    pub meta: StateMeta,
+    /// Maximum per-subscriber queue depth a client may ask for.
+    pub buffer: usize,
+}
+
+impl StateSpec {
+    /// A spec with the default subscriber buffer.
+    pub fn new(name: impl Into<String>, meta: StateMeta) -> Self {
+        Self {
+            name: name.into(),
+            meta,
+            buffer: qos::STATE_BUFFER,
+        }
+    }
+}
+
+/// Publishes every state of one subsystem and its tick event.
+pub struct StatePublisher {
+    subsystem: String,
+    ports: Vec<Publisher<ipc::Service, StateSample, ()>>,
+    seqs: Vec<u64>,
+    notifier: Notifier<ipc::Service>,
+    // Keep the services alive for as long as we publish on them.
+    _services: Vec<StateService>,
+    _tick: EventService,
+}
+
+impl core::fmt::Debug for StatePublisher {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("StatePublisher")
+            .field("subsystem", &self.subsystem)
+            .field("states", &self.ports.len())
+            .finish()
+    }
+}
+
+impl StatePublisher {
+    /// Creates the services `conductor/<subsystem>/<state>` for every spec, and the tick event.
+    pub fn create(bus: &Bus, subsystem: &str, specs: &[StateSpec]) -> Result<Self> {
+        naming::validate("subsystem", subsystem)?;
+        let mut services = Vec::with_capacity(specs.len());
+        let mut ports = Vec::with_capacity(specs.len());
+        for (i, spec) in specs.iter().enumerate() {
+            naming::validate("state", &spec.name)?;
+            if spec.meta.index as usize != i {
+                return Err(BusError::InvalidName {
+                    what: "state",
+                    name: spec.name.clone(),
+                    reason: "meta.index must equal the state's position in the subsystem",
+                });
+            }
+            let name = naming::state(subsystem, &spec.name);
+            let attrs = spec.meta.to_attributes()?;
+            let buffer = spec.buffer.max(1);
+            let service = bus.create_or_reopen_pubsub::<StateSample>(&name, &attrs, |b| {
+                b.max_publishers(qos::STATE_PUBLISHERS)
+                    .max_subscribers(qos::STATE_SUBSCRIBERS)
+                    .max_nodes(qos::MAX_NODES)
+                    .history_size(1)
+                    .subscriber_max_buffer_size(buffer)
+                    .enable_safe_overflow(true)
+            })?;
+            let port = service
+                .publisher_builder()
+                .create()
+                .map_err(|e| BusError::iox(format!("publisher for {name:?}"), e))?;
+            services.push(service);
+            ports.push(port);
+        }
+        let tick = bus.tick_event(subsystem)?;
+        let notifier = tick
+            .notifier_builder()
+            .create()
+            .map_err(|e| BusError::iox("tick notifier", e))?;
+        Ok(Self {
+            subsystem: subsystem.into(),
+            seqs: vec![0; ports.len()],
+            ports,
+            notifier,
+            _services: services,
+            _tick: tick,
+        })
+    }
+
+    /// Number of states.
+    pub fn len(&self) -> usize {
+        self.ports.len()
+    }
+
+    /// Whether the subsystem has no states.
+    pub fn is_empty(&self) -> bool {
+        self.ports.is_empty()
+    }
+
+    /// The subsystem name.
+    pub fn subsystem(&self) -> &str {
+        &self.subsystem
+    }
+
+    /// Publishes a sample of state `index`; `seq` and `t_publish_ns` are filled in here.
+    /// Returns the number of subscribers reached.
+    #[inline]
+    pub fn publish(
+        &mut self,
+        index: usize,
+        tick: u64,
+        t_sample_ns: u64,
+        value: f64,
+        status: u32,
+    ) -> Result<usize> {
+        let port = self.ports.get(index).ok_or_else(|| BusError::InvalidName {
+            what: "state",
+            name: index.to_string(),
+            reason: "state index out of range",
+        })?;
+        let seq = self.seqs[index];
+        let sample = port
+            .loan_uninit()
+            .map_err(|e| BusError::iox("loaning a state sample", e))?;
+        let sample = sample.write_payload(StateSample {
+            seq,
+            tick,
+            t_sample_ns,
+            t_publish_ns: monotonic_ns(),
+            value,
+            status,
+            reserved: 0,
+        });
+        let reached = sample
+            .send()
+            .map_err(|e| BusError::iox("sending a state sample", e))?;
+        self.seqs[index] = seq + 1;
+        Ok(reached)
+    }
+
+    /// Wakes every tick listener once; call after the batch of a tick is published.
+    #[inline]
+    pub fn notify_tick(&mut self) -> Result<usize> {
+        self.notifier
+            .notify()
+            .map_err(|e| BusError::iox("notifying tick", e))
+    }
+}
+
+/// Receives the command frames of one subsystem.
+pub struct CommandReceiver {
+    port: Subscriber<ipc::Service, CommandFrame, ()>,
+    _service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        ipc::Service,
+        CommandFrame,
+        (),
+    >,
+}
+
+impl core::fmt::Debug for CommandReceiver {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("CommandReceiver")
+    }
+}
+
+impl CommandReceiver {
+    /// Creates `conductor/<subsystem>/commands` (owner side).
+    pub fn create(bus: &Bus, subsystem: &str) -> Result<Self> {
+        naming::validate("subsystem", subsystem)?;
+        let name = naming::commands(subsystem);
+        let attrs = base_attributes(ServiceKind::Commands)?;
+        let service = bus.create_or_reopen_pubsub::<CommandFrame>(&name, &attrs, |b| {
+            b.max_publishers(qos::COMMAND_PUBLISHERS)
+                .max_subscribers(qos::COMMAND_SUBSCRIBERS)
+                .max_nodes(qos::MAX_NODES)
+                .history_size(0)
+                .subscriber_max_buffer_size(qos::COMMAND_BUFFER)
+                .enable_safe_overflow(true)
+        })?;
+        let port = service
+            .subscriber_builder()
+            .buffer_size(qos::COMMAND_BUFFER)
+            .create()
+            .map_err(|e| BusError::iox("command subscriber", e))?;
+        Ok(Self {
+            port,
+            _service: service,
+        })
+    }
+
+    /// Hands every queued frame, oldest first, to `apply` (zero-copy: the frame stays in shared
+    /// memory). Returns the number of frames drained.
+    #[inline]
+    pub fn drain(&mut self, mut apply: impl FnMut(&CommandFrame)) -> Result<usize> {
+        let mut n = 0;
+        loop {
+            match self.port.receive() {
+                Ok(Some(frame)) => {
+                    apply(&frame);
+                    n += 1;
+                }
+                Ok(None) => return Ok(n),
+                Err(e) => return Err(BusError::iox("receiving commands", e)),
+            }
+        }
+    }
+}
+
+/// Publishes [`ExecutorStats`] on `conductor/<subsystem>/stats`.
+pub struct StatsPublisher {
+    port: Publisher<ipc::Service, ExecutorStats, ()>,
+    _service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
+        ipc::Service,
+        ExecutorStats,
+        (),
+    >,
+}
+
+impl core::fmt::Debug for StatsPublisher {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("StatsPublisher")
+    }
+}
+
+impl StatsPublisher {
+    /// Creates the stats service of `subsystem`.
+    pub fn create(bus: &Bus, subsystem: &str) -> Result<Self> {
+        naming::validate("subsystem", subsystem)?;
+        let name = naming::stats(subsystem);
+        let attrs = base_attributes(ServiceKind::Stats)?;
+        let service = bus.create_or_reopen_pubsub::<ExecutorStats>(&name, &attrs, |b| {
+            b.max_publishers(2)
+                .max_subscribers(qos::STATS_SUBSCRIBERS)
+                .max_nodes(qos::MAX_NODES)
+                .history_size(1)
+                .subscriber_max_buffer_size(4)
+                .enable_safe_overflow(true)
+        })?;
+        let port = service
+            .publisher_builder()
+            .create()
+            .map_err(|e| BusError::iox("stats publisher", e))?;
+        Ok(Self {
+            port,
+            _service: service,
+        })
+    }
+
+    /// Publishes a stats snapshot (written straight into shared memory).
+    pub fn publish(&mut self, fill: impl FnOnce(&mut ExecutorStats)) -> Result<()> {
+        let sample = self
+            .port
+            .loan_uninit()
+            .map_err(|e| BusError::iox("loaning stats", e))?;
+        let mut stats = ExecutorStats::default();
+        fill(&mut stats);
+        sample
+            .write_payload(stats)
+            .send()
+            .map_err(|e| BusError::iox("sending stats", e))?;
+        Ok(())
+    }
+}
+
+/// Keeps a tick listener type in scope for the client module.
+pub(crate) type TickListener = Listener<ipc::Service>;

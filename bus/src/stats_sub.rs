@@ -1,0 +1,68 @@
+//! Reading an executor's health from `conductor/<subsystem>/stats`.
+
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{ipc, MessagingPattern, ZeroCopySend};
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+
+use crate::abi::ExecutorStats;
+use crate::bus::Bus;
+use crate::error::{BusError, Result};
+use crate::metadata::ServiceKind;
+use crate::naming;
+
+/// Subscribes to an executor's [`ExecutorStats`].
+pub struct StatsSubscriber {
+    port: Subscriber<ipc::Service, ExecutorStats, ()>,
+    latest: Option<ExecutorStats>,
+    _service: PortFactory<ipc::Service, ExecutorStats, ()>,
+}
+
+impl core::fmt::Debug for StatsSubscriber {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("StatsSubscriber")
+    }
+}
+
+impl StatsSubscriber {
+    /// Opens the stats of `subsystem`.
+    pub fn new(bus: &Bus, subsystem: &str) -> Result<Self> {
+        naming::validate("subsystem", subsystem)?;
+        let name = naming::stats(subsystem);
+        let Some(details) = bus.details(&name, MessagingPattern::PublishSubscribe)? else {
+            return Err(BusError::UnknownSubsystem {
+                name: subsystem.into(),
+                domain: bus.domain().name().into(),
+                service: name,
+            });
+        };
+        // SAFETY: type_name() has no preconditions.
+        let tn = unsafe { ExecutorStats::type_name() };
+        bus.check_conductor_service(&name, &details, ServiceKind::Stats, tn)?;
+        let service = bus
+            .node()
+            .service_builder(&Bus::service_name(&name)?)
+            .publish_subscribe::<ExecutorStats>()
+            .open()
+            .map_err(|e| BusError::iox(format!("opening {name:?}"), e))?;
+        let port = service
+            .subscriber_builder()
+            .create()
+            .map_err(|e| BusError::iox("stats subscriber", e))?;
+        Ok(Self {
+            port,
+            latest: None,
+            _service: service,
+        })
+    }
+
+    /// The newest stats received so far (drains the queue).
+    pub fn latest(&mut self) -> Result<Option<ExecutorStats>> {
+        loop {
+            match self.port.receive() {
+                Ok(Some(s)) => self.latest = Some(*s),
+                Ok(None) => return Ok(self.latest),
+                Err(e) => return Err(BusError::iox("receiving stats", e)),
+            }
+        }
+    }
+}

@@ -1,0 +1,73 @@
+//! Waiting for a subsystem's next tick without polling.
+
+use core::time::Duration;
+
+use iceoryx2::prelude::FileDescriptorBased;
+
+use crate::bus::{Bus, EventService};
+use crate::error::{BusError, Result};
+use crate::naming;
+use crate::owner::TickListener;
+
+/// Sleeps until the owner of a subsystem has published a tick's batch of samples.
+///
+/// Backed by an iceoryx2 event listener (a socket the kernel wakes), so a controller uses no CPU
+/// while it waits. The listener can also be attached to one's own iceoryx2 `WaitSet` to wait on
+/// several subsystems at once.
+pub struct TickWaiter {
+    listener: TickListener,
+    _service: EventService,
+}
+
+impl core::fmt::Debug for TickWaiter {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("TickWaiter")
+    }
+}
+
+impl TickWaiter {
+    /// Listens to `conductor/<subsystem>/tick`.
+    pub fn new(bus: &Bus, subsystem: &str) -> Result<Self> {
+        naming::validate("subsystem", subsystem)?;
+        let service = bus.tick_event(subsystem)?;
+        let listener = service
+            .listener_builder()
+            .create()
+            .map_err(|e| BusError::iox("tick listener", e))?;
+        Ok(Self {
+            listener,
+            _service: service,
+        })
+    }
+
+    /// Blocks until at least one tick arrives or `timeout` passes. Returns the number of ticks
+    /// signalled since the last call (0 on timeout). Pending notifications are consumed.
+    pub fn wait(&mut self, timeout: Duration) -> Result<u64> {
+        let mut ticks = 0;
+        self.listener
+            .timed_wait(|activation| ticks += activation.count.max(1), timeout)
+            .map_err(|e| BusError::iox("waiting for a tick", e))?;
+        Ok(ticks)
+    }
+
+    /// Consumes pending notifications without blocking; returns how many there were.
+    pub fn try_consume(&mut self) -> Result<u64> {
+        let mut ticks = 0;
+        self.listener
+            .try_wait(|activation| ticks += activation.count.max(1))
+            .map_err(|e| BusError::iox("polling ticks", e))?;
+        Ok(ticks)
+    }
+
+    /// The underlying listener, to attach to an iceoryx2 `WaitSet`.
+    pub fn listener(&self) -> &TickListener {
+        &self.listener
+    }
+
+    /// The listener's file descriptor number, for foreign event loops (epoll, tokio).
+    pub fn raw_fd(&self) -> i32 {
+        // SAFETY: the returned descriptor is owned by `self.listener` and stays valid while
+        // `self` lives; we only report its number.
+        unsafe { self.listener.file_descriptor().native_handle() }
+    }
+}
