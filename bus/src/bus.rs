@@ -3,9 +3,7 @@
 use std::rc::Rc;
 
 use iceoryx2::node::{Node, NodeBuilder};
-use iceoryx2::prelude::{
-    ipc, AttributeSpecifier, AttributeVerifier, MessagingPattern, Service as _,
-};
+use iceoryx2::prelude::{AttributeSpecifier, AttributeVerifier, MessagingPattern, Service as _};
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 use iceoryx2::service::service_name::ServiceName;
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
@@ -16,6 +14,7 @@ use crate::domain::Domain;
 use crate::error::{BusError, Result};
 use crate::metadata::{self, ServiceKind, KEY_ABI, KEY_KIND};
 use crate::naming;
+use crate::variant::RtIpc;
 
 /// Quality of service of every Conductor service. Owners create services with these values;
 /// clients open them without requirements, so the two never disagree.
@@ -40,12 +39,12 @@ pub(crate) mod qos {
     pub const TICK_LISTENERS: usize = 32;
 }
 
-pub(crate) type StateService = publish_subscribe::PortFactory<ipc::Service, StateSample, ()>;
-pub(crate) type EventService = event::PortFactory<ipc::Service>;
+pub(crate) type StateService = publish_subscribe::PortFactory<RtIpc, StateSample, ()>;
+pub(crate) type EventService = event::PortFactory<RtIpc>;
 
 struct Inner {
     domain: Domain,
-    node: Node<ipc::Service>,
+    node: Node<RtIpc>,
 }
 
 /// A process's connection to one [`Domain`]: an iceoryx2 node from which every publisher,
@@ -73,7 +72,7 @@ impl Bus {
         let node = NodeBuilder::new()
             .name(&name)
             .config(domain.iceoryx2_config())
-            .create::<ipc::Service>()
+            .create::<RtIpc>()
             .map_err(|e| BusError::iox(format!("joining domain {:?}", domain.name()), e))?;
         Ok(Self {
             inner: Rc::new(Inner {
@@ -93,7 +92,7 @@ impl Bus {
         &self.inner.domain
     }
 
-    pub(crate) fn node(&self) -> &Node<ipc::Service> {
+    pub(crate) fn node(&self) -> &Node<RtIpc> {
         &self.inner.node
     }
 
@@ -107,8 +106,8 @@ impl Bus {
         &self,
         name: &str,
         pattern: MessagingPattern,
-    ) -> Result<Option<ServiceDetails<ipc::Service>>> {
-        ipc::Service::details(
+    ) -> Result<Option<ServiceDetails<RtIpc>>> {
+        RtIpc::details(
             &Self::service_name(name)?,
             self.domain().iceoryx2_config(),
             pattern,
@@ -120,7 +119,7 @@ impl Bus {
     pub(crate) fn check_conductor_service(
         &self,
         name: &str,
-        details: &ServiceDetails<ipc::Service>,
+        details: &ServiceDetails<RtIpc>,
         kind: ServiceKind,
         type_name: &str,
     ) -> Result<()> {
@@ -182,13 +181,10 @@ impl Bus {
         name: &str,
         attrs: &AttributeSpecifier,
         configure: impl Fn(
-            iceoryx2::service::builder::publish_subscribe::Builder<T, (), ipc::Service>,
-        ) -> iceoryx2::service::builder::publish_subscribe::Builder<
-            T,
-            (),
-            ipc::Service,
-        >,
-    ) -> Result<publish_subscribe::PortFactory<ipc::Service, T, ()>>
+            iceoryx2::service::builder::publish_subscribe::Builder<T, (), RtIpc>,
+        )
+            -> iceoryx2::service::builder::publish_subscribe::Builder<T, (), RtIpc>,
+    ) -> Result<publish_subscribe::PortFactory<RtIpc, T, ()>>
     where
         T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + 'static,
     {

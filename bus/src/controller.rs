@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 
 use iceoryx2::port::publisher::Publisher;
-use iceoryx2::prelude::{ipc, MessagingPattern, ZeroCopySend};
+use iceoryx2::prelude::{MessagingPattern, ZeroCopySend};
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use crate::abi::{CommandFrame, MAX_SETPOINTS};
@@ -14,6 +14,7 @@ use crate::error::{BusError, Result};
 use crate::metadata::{ServiceKind, StateMeta};
 use crate::naming;
 use crate::state::State;
+use crate::variant::RtIpc;
 
 /// Default history kept for states read through [`Controller::get_surface`].
 pub const SURFACE_HISTORY: usize = 256;
@@ -26,10 +27,10 @@ struct Target {
 
 struct Outbox {
     subsystem: String,
-    port: Publisher<ipc::Service, CommandFrame, ()>,
+    port: Publisher<RtIpc, CommandFrame, ()>,
     frame: CommandFrame,
     seq: u64,
-    _service: PortFactory<ipc::Service, CommandFrame, ()>,
+    _service: PortFactory<RtIpc, CommandFrame, ()>,
 }
 
 /// Buffers setpoints and sends them as one [`CommandFrame`] per subsystem, which the owning

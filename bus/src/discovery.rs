@@ -2,7 +2,7 @@
 //! records (no daemon, no registry process).
 
 use iceoryx2::node::NodeView;
-use iceoryx2::prelude::{ipc, CallbackProgression, MessagingPattern, NodeState, Service as _};
+use iceoryx2::prelude::{CallbackProgression, MessagingPattern, NodeState, Service as _};
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
 
 use crate::abi::{StateSample, ABI_VERSION};
@@ -10,6 +10,7 @@ use crate::bus::Bus;
 use crate::error::{BusError, Result};
 use crate::metadata::{self, ServiceKind, StateMeta, KEY_ABI, KEY_KIND};
 use crate::naming::{self, StateRef};
+use crate::variant::RtIpc;
 
 /// A state as discovery sees it.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,7 +43,7 @@ impl Bus {
     pub fn list_states(&self) -> Result<Vec<StateInfo>> {
         let mut out = Vec::new();
         let abi = ABI_VERSION.to_string();
-        ipc::Service::list(self.domain().iceoryx2_config(), |details| {
+        RtIpc::list(self.domain().iceoryx2_config(), |details| {
             let stat = &details.static_details;
             if !matches!(stat.messaging_pattern(), StaticPattern::PublishSubscribe(_)) {
                 return CallbackProgression::Continue;

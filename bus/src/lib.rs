@@ -48,6 +48,7 @@ mod spectrum;
 mod state;
 mod subscriber;
 mod tick;
+mod variant;
 mod vector;
 
 pub use abi::{
@@ -70,4 +71,5 @@ pub use state::State;
 pub use stats_sub::StatsSubscriber;
 pub use subscriber::{StateSubscriber, DEFAULT_BUFFER};
 pub use tick::TickWaiter;
+pub use variant::{heap_fallbacks, prepare_thread, PooledRc, RtIpc};
 mod stats_sub;

@@ -7,11 +7,11 @@
 //! | `conductor.abi` | [`crate::ABI_VERSION`] in decimal |
 //! | `conductor.kind` | `state`, `commands`, `tick` or `stats` |
 //! | `conductor.index` | index of the state within its subsystem (the setpoint address) |
-//! | `conductor.units` | SI-style unit string, e.g. `rad`, `A`, `V` (may be empty) |
+//! | `conductor.units` | SI-style unit string, e.g. `rad`, `A`, `V` (absent when unitless) |
 //! | `conductor.writable` | `true` or `false` |
 //! | `conductor.rate_hz` | publish rate in Hz |
 //! | `conductor.limits` | `min,max` (either may be `-inf`/`inf`) |
-//! | `conductor.device` | the device the state belongs to (may be empty) |
+//! | `conductor.device` | the device the state belongs to (absent when none) |
 
 use iceoryx2::prelude::{AttributeSet, AttributeSpecifier};
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
@@ -129,7 +129,10 @@ impl StateMeta {
     pub(crate) fn to_attributes(&self) -> Result<AttributeSpecifier> {
         let mut spec = base_attributes(ServiceKind::State)?;
         spec = define(spec, KEY_INDEX, &self.index.to_string())?;
-        spec = define(spec, KEY_UNITS, &self.units)?;
+        // iceoryx2 rejects empty values: absent means empty.
+        if !self.units.is_empty() {
+            spec = define(spec, KEY_UNITS, &self.units)?;
+        }
         spec = define(
             spec,
             KEY_WRITABLE,
@@ -141,7 +144,10 @@ impl StateMeta {
             KEY_LIMITS,
             &format!("{},{}", fmt_limit(self.min), fmt_limit(self.max)),
         )?;
-        define(spec, KEY_DEVICE, &self.device)
+        if !self.device.is_empty() {
+            spec = define(spec, KEY_DEVICE, &self.device)?;
+        }
+        Ok(spec)
     }
 
     /// Reads the metadata back from a service's attributes; `None` if a required key is missing
@@ -194,6 +200,14 @@ mod tests {
         assert_eq!(get(attrs, KEY_KIND).as_deref(), Some("state"));
         assert_eq!(get(attrs, KEY_ABI).as_deref(), Some("1"));
         assert_eq!(StateMeta::from_attributes(attrs), Some(m));
+    }
+
+    #[test]
+    fn empty_units_and_device_are_omitted() {
+        let m = StateMeta::default();
+        let spec = m.to_attributes().unwrap();
+        assert_eq!(spec.attributes().number_of_attributes(), 6);
+        assert_eq!(StateMeta::from_attributes(spec.attributes()), Some(m));
     }
 
     #[test]

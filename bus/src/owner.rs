@@ -8,7 +8,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::ipc;
+use iceoryx2::prelude::PortFactory as _;
 
 use crate::abi::{CommandFrame, ExecutorStats, StateSample};
 use crate::bus::{qos, Bus, EventService, StateService};
@@ -16,6 +16,7 @@ use crate::clock::monotonic_ns;
 use crate::error::{BusError, Result};
 use crate::metadata::{base_attributes, ServiceKind, StateMeta};
 use crate::naming;
+use crate::variant::RtIpc;
 
 /// Declaration of one state an executor owns.
 #[derive(Debug, Clone)]
@@ -43,9 +44,9 @@ impl StateSpec {
 /// Publishes every state of one subsystem and its tick event.
 pub struct StatePublisher {
     subsystem: String,
-    ports: Vec<Publisher<ipc::Service, StateSample, ()>>,
+    ports: Vec<Publisher<RtIpc, StateSample, ()>>,
     seqs: Vec<u64>,
-    notifier: Notifier<ipc::Service>,
+    notifier: Notifier<RtIpc>,
     // Keep the services alive for as long as we publish on them.
     _services: Vec<StateService>,
     _tick: EventService,
@@ -159,6 +160,13 @@ impl StatePublisher {
         Ok(reached)
     }
 
+    /// Number of subscribers currently attached to state `index` (0 if out of range).
+    pub fn subscribers(&self, index: usize) -> usize {
+        self._services
+            .get(index)
+            .map_or(0, |s| s.dynamic_config().number_of_subscribers())
+    }
+
     /// Wakes every tick listener once; call after the batch of a tick is published.
     #[inline]
     pub fn notify_tick(&mut self) -> Result<usize> {
@@ -170,12 +178,9 @@ impl StatePublisher {
 
 /// Receives the command frames of one subsystem.
 pub struct CommandReceiver {
-    port: Subscriber<ipc::Service, CommandFrame, ()>,
-    _service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-        ipc::Service,
-        CommandFrame,
-        (),
-    >,
+    port: Subscriber<RtIpc, CommandFrame, ()>,
+    _service:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, CommandFrame, ()>,
 }
 
 impl core::fmt::Debug for CommandReceiver {
@@ -229,12 +234,9 @@ impl CommandReceiver {
 
 /// Publishes [`ExecutorStats`] on `conductor/<subsystem>/stats`.
 pub struct StatsPublisher {
-    port: Publisher<ipc::Service, ExecutorStats, ()>,
-    _service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<
-        ipc::Service,
-        ExecutorStats,
-        (),
-    >,
+    port: Publisher<RtIpc, ExecutorStats, ()>,
+    _service:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, ExecutorStats, ()>,
 }
 
 impl core::fmt::Debug for StatsPublisher {
@@ -284,4 +286,4 @@ impl StatsPublisher {
 }
 
 /// Keeps a tick listener type in scope for the client module.
-pub(crate) type TickListener = Listener<ipc::Service>;
+pub(crate) type TickListener = Listener<RtIpc>;

@@ -1,7 +1,7 @@
 //! Reading an executor's health from `conductor/<subsystem>/stats`.
 
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{ipc, MessagingPattern, ZeroCopySend};
+use iceoryx2::prelude::{MessagingPattern, ZeroCopySend};
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use crate::abi::ExecutorStats;
@@ -9,12 +9,13 @@ use crate::bus::Bus;
 use crate::error::{BusError, Result};
 use crate::metadata::ServiceKind;
 use crate::naming;
+use crate::variant::RtIpc;
 
 /// Subscribes to an executor's [`ExecutorStats`].
 pub struct StatsSubscriber {
-    port: Subscriber<ipc::Service, ExecutorStats, ()>,
+    port: Subscriber<RtIpc, ExecutorStats, ()>,
     latest: Option<ExecutorStats>,
-    _service: PortFactory<ipc::Service, ExecutorStats, ()>,
+    _service: PortFactory<RtIpc, ExecutorStats, ()>,
 }
 
 impl core::fmt::Debug for StatsSubscriber {

@@ -1,13 +1,14 @@
 //! [`StateSubscriber`]: the raw sample stream of one state, with loss accounting.
 
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{ipc, MessagingPattern, PortFactory as _, ZeroCopySend};
+use iceoryx2::prelude::{MessagingPattern, PortFactory as _, ZeroCopySend};
 
 use crate::abi::StateSample;
 use crate::bus::{Bus, StateService};
 use crate::discovery::StateInfo;
 use crate::error::{BusError, Result};
 use crate::metadata::ServiceKind;
+use crate::variant::RtIpc;
 
 /// Default queue depth a subscriber asks for (capped at what the service offers).
 pub const DEFAULT_BUFFER: usize = 64;
@@ -19,7 +20,7 @@ pub const DEFAULT_BUFFER: usize = 64;
 /// means the owner restarted; counting starts over from the new sequence.
 pub struct StateSubscriber {
     info: StateInfo,
-    port: Subscriber<ipc::Service, StateSample, ()>,
+    port: Subscriber<RtIpc, StateSample, ()>,
     next_seq: Option<u64>,
     received: u64,
     missed: u64,

@@ -1,0 +1,82 @@
+//! Helpers for cross-process tests: start `conductor-bus-peer` processes on a private domain.
+
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, ChildStdout, Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use conductor_bus::Domain;
+
+/// A peer process whose stdout lines arrive on a channel.
+pub struct Peer {
+    pub child: Child,
+    lines: mpsc::Receiver<String>,
+}
+
+impl Peer {
+    /// Starts `conductor-bus-peer --domain <d> <args>`.
+    pub fn start(domain: &Domain, args: &[&str]) -> Peer {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_conductor-bus-peer"))
+            .arg("--domain")
+            .arg(domain.name())
+            .args(args)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("start conductor-bus-peer");
+        let stdout: ChildStdout = child.stdout.take().unwrap();
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Peer { child, lines: rx }
+    }
+
+    /// The next stdout line, or panics after `secs`.
+    pub fn line(&self, secs: u64) -> String {
+        self.lines
+            .recv_timeout(Duration::from_secs(secs))
+            .expect("peer printed nothing in time")
+    }
+
+    /// Waits for the peer's `READY` line.
+    pub fn ready(self) -> Peer {
+        let l = self.line(20);
+        assert_eq!(l, "READY", "peer did not start");
+        self
+    }
+
+    /// Waits for exit and returns (success, remaining stdout lines).
+    pub fn finish(mut self) -> (bool, Vec<String>) {
+        let ok = self.child.wait().expect("wait peer").success();
+        let mut rest = Vec::new();
+        while let Ok(l) = self.lines.recv_timeout(Duration::from_millis(500)) {
+            rest.push(l);
+        }
+        (ok, rest)
+    }
+}
+
+impl Drop for Peer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Parses `received R missed M last_seq S`.
+pub fn parse_report(line: &str) -> (u64, u64, Option<u64>) {
+    let f: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(f.len(), 6, "unexpected report {line:?}");
+    (
+        f[1].parse().unwrap(),
+        f[3].parse().unwrap(),
+        f[5].parse().ok(),
+    )
+}
