@@ -1,0 +1,108 @@
+//! `cargo xtask <task>`: the project's automation, with no dependencies beyond std so it builds
+//! in seconds on a fresh machine.
+//!
+//! * `setup` — installs what the test suite needs and the machine may lack: the Python venv with
+//!   the interop packages (`tools/python-requirements.txt`).
+//! * `test`  — `setup`, then every test of the workspace.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitCode};
+use std::time::Instant;
+
+fn main() -> ExitCode {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let task = args.first().map(String::as_str).unwrap_or("help");
+    let result = match task {
+        "setup" => setup().map(|_| ()),
+        "test" => test(),
+        _ => {
+            eprintln!("usage: cargo xtask <setup|test>");
+            eprintln!("  setup  install the Python venv and other test prerequisites");
+            eprintln!("  test   setup, then run the whole test suite");
+            return ExitCode::from(2);
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("xtask {task}: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+type Result<T = ()> = std::result::Result<T, String>;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .nth(2)
+        .expect("tools/xtask sits two levels below the workspace root")
+        .to_path_buf()
+}
+
+fn run(cmd: &mut Command) -> Result {
+    eprintln!("xtask: running {cmd:?}");
+    let status = cmd
+        .status()
+        .map_err(|e| format!("cannot start {cmd:?}: {e}"))?;
+    if status.success() {
+        Ok(())
+    } else {
+        Err(format!("{cmd:?} failed with {status}"))
+    }
+}
+
+/// What the test suite needs, installed if missing. Returns the environment the tests need.
+fn setup() -> Result<Vec<(String, String)>> {
+    let t = Instant::now();
+    let python = python_venv()?;
+    eprintln!("xtask: setup done in {:.1} s", t.elapsed().as_secs_f64());
+    Ok(vec![(
+        "CONDUCTOR_PYTHON".into(),
+        python.display().to_string(),
+    )])
+}
+
+/// `.venv` with the pinned interop packages; reinstalled only when the requirements change.
+fn python_venv() -> Result<PathBuf> {
+    let root = root();
+    let venv = root.join(".venv");
+    let python = venv.join("bin/python");
+    let reqs = root.join("tools/python-requirements.txt");
+    let wanted = std::fs::read_to_string(&reqs).map_err(|e| format!("{}: {e}", reqs.display()))?;
+    let stamp = venv.join("conductor-requirements.txt");
+    if std::fs::read_to_string(&stamp).ok().as_deref() == Some(wanted.as_str()) && python.exists() {
+        return Ok(python);
+    }
+    if !python.exists() {
+        run(Command::new("python3").args(["-m", "venv"]).arg(&venv))?;
+    }
+    run(Command::new(&python)
+        .args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "-r",
+        ])
+        .arg(&reqs))?;
+    std::fs::write(&stamp, wanted).map_err(|e| e.to_string())?;
+    Ok(python)
+}
+
+fn test() -> Result {
+    let env = setup()?;
+    let root = root();
+    let t = Instant::now();
+    run(Command::new(env!("CARGO"))
+        .current_dir(&root)
+        .args(["test", "--workspace", "--locked"])
+        .envs(env.iter().map(|(k, v)| (k, v))))?;
+    eprintln!(
+        "xtask: workspace tests passed in {:.1} s",
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
