@@ -25,7 +25,7 @@
 extern crate std;
 
 //pub mod can;
-// pub mod dynamixel1;
+pub mod dynamixel1;
 pub mod dynamixel2;
 //pub mod mit_can;
 //pub mod odrive_can;
