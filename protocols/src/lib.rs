@@ -24,11 +24,11 @@
 #[cfg(test)]
 extern crate std;
 
-//pub mod can;
+pub mod can;
 pub mod dynamixel1;
 pub mod dynamixel2;
-//pub mod mit_can;
-//pub mod odrive_can;
+pub mod mit_can;
+pub mod odrive_can;
 pub mod scan;
 //pub mod slcan;
 mod writer;
