@@ -30,7 +30,7 @@ pub mod dynamixel2;
 pub mod mit_can;
 pub mod odrive_can;
 pub mod scan;
-//pub mod slcan;
+pub mod slcan;
 mod writer;
 
 pub use writer::BufferTooSmall;

@@ -383,7 +383,7 @@ impl Message {
         }
     }
 
-    /// Encodes the payload; returns the bytes and the DLC.
+    /// Encodes the payload; returns the bytes and the DLC (the DBC's message length).
     pub fn encode(&self) -> Result<([u8; 8], usize), OdriveError> {
         use Message::*;
         let p = Payload::new();
@@ -505,10 +505,17 @@ impl Message {
             Reboot { action } => p.put(&[action]),
             ClearErrors { identify } => p.put(&[identify]),
         };
-        Ok((p.data, p.len))
+        // ODrive's DBC gives every message DLC 8 (zero padded) except Estop and
+        // Enter_DFU_Mode (0) and Reboot and Clear_Errors (1).
+        let dlc = match self {
+            Estop | EnterDfuMode | Reboot { .. } | ClearErrors { .. } => p.len,
+            _ => 8,
+        };
+        Ok((p.data, dlc))
     }
 
-    /// Decodes the payload of command `cmd` (bytes beyond the message's length are ignored).
+    /// Decodes the payload of command `cmd`. Only the bytes the fields occupy are required;
+    /// padding and bytes beyond are ignored.
     pub fn decode(cmd: CmdId, d: &[u8]) -> Result<Self, OdriveError> {
         use Message::*;
         let needed = match cmd {

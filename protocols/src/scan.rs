@@ -44,7 +44,7 @@ pub struct Tally {
 }
 
 impl Tally {
-    fn add(&mut self, bytes: usize, new_event: bool) {
+    pub(crate) fn add(&mut self, bytes: usize, new_event: bool) {
         self.bytes += bytes as u64;
         if new_event {
             self.events += 1;

@@ -250,7 +250,7 @@ fn odrive_vectors() {
                 requested_state: axis_state::CLOSED_LOOP_CONTROL
             }
         ),
-        (0x027, hex("08 00 00 00"))
+        (0x027, hex("08 00 00 00 00 00 00 00"))
     );
     assert_eq!(
         odrive(
@@ -359,6 +359,13 @@ fn odrive_frames_and_requests() {
                 measured: 0.75
             }
         ))
+    );
+    assert_eq!(odrive(1, &Message::Estop).1.len(), 0);
+    assert_eq!(odrive(1, &Message::Reboot { action: 1 }).1, vec![1]);
+    assert_eq!(odrive(1, &Message::ClearErrors { identify: 0 }).1, vec![0]);
+    assert_eq!(
+        odrive(1, &Message::SetInputTorque { torque: 1.0 }).1,
+        hex("00 00 80 3F 00 00 00 00")
     );
     let odd = CanFrame::standard(1 << 5 | 0x08, &[]).unwrap();
     assert_eq!(
