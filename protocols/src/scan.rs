@@ -30,8 +30,9 @@
 //! decision depends on bytes that have not arrived yet, the scanner waits for them.
 //!
 //! `expire()` tells the scanner that the line has gone quiet (the reply timeout passed): a
-//! candidate still waiting for bytes is then discarded as **truncated**, and scanning resumes
-//! after it, so complete packets behind a truncated one are still yielded.
+//! candidate (a complete header) still waiting for bytes is then discarded as **truncated**,
+//! and scanning resumes after it, so complete packets behind a truncated one are still
+//! yielded. A trailing fragment shorter than the header is garbage.
 
 /// Bytes and occurrences discarded for one cause.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
