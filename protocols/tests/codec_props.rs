@@ -84,6 +84,18 @@ proptest! {
         prop_assert_eq!(&p.params[..4], &[addr.to_le_bytes(), 4u16.to_le_bytes()].concat()[..]);
         let body: Vec<u8> = entries.iter().flat_map(|(i, d)| std::iter::once(*i).chain(d.iter().copied())).collect();
         prop_assert_eq!(&p.params[4..], &body[..]);
+        let req = d2::Request::from_packet(&p).unwrap();
+        prop_assert_eq!(req.sync_write_entries().collect::<Vec<_>>(), list);
+    }
+
+    #[test]
+    fn dxl2_bulk_write_round_trips(entries in prop::collection::btree_map(device_id(), (any::<u16>(), stuffy_bytes(12)), 1..12)) {
+        let list: Vec<_> = entries.iter().map(|(&id, (addr, data))| d2::BulkWriteEntry { id, addr: *addr, data }).collect();
+        let mut buf = [0u8; 512];
+        let n = d2::bulk_write(&mut buf, list.iter().copied()).unwrap();
+        let p = d2::parse_in_place(&mut buf[..n]).unwrap();
+        let req = d2::Request::from_packet(&p).unwrap();
+        prop_assert_eq!(req.bulk_write_entries().collect::<Vec<_>>(), list);
     }
 
     #[test]
@@ -96,7 +108,9 @@ proptest! {
         let decoded: Vec<_> = p.params.chunks(5).map(|c| d2::BulkReadEntry {
             id: c[0], addr: u16::from_le_bytes([c[1], c[2]]), len: u16::from_le_bytes([c[3], c[4]]),
         }).collect();
-        prop_assert_eq!(decoded, list);
+        prop_assert_eq!(&decoded, &list);
+        let req = d2::Request::from_packet(&p).unwrap();
+        prop_assert_eq!(req.bulk_read_entries().collect::<Vec<_>>(), list);
     }
 
     #[test]
@@ -231,6 +245,13 @@ proptest! {
         let _ = d2::check_frame(&bytes);
         if let Ok(p) = d2::parse_in_place(&mut copy) {
             let _ = d2::Status::from_packet(&p).map(|s| d2::PingInfo::from_status(&s));
+        }
+        // Arbitrary parameters under every instruction code, as a simulator would see them.
+        for inst in [0x01u8, 0x02, 0x03, 0x04, 0x06, 0x10, 0x20, 0x82, 0x83, 0x8A, 0x92, 0x93, 0x9A] {
+            let p = d2::Packet { id: d2::BROADCAST_ID, instruction: inst, params: &bytes, wire_len: 0 };
+            if let Ok(r) = d2::Request::from_packet(&p) {
+                let _ = (r.sync_write_entries().count(), r.bulk_read_entries().count(), r.bulk_write_entries().count());
+            }
         }
         // Fast reply splitting on arbitrary bodies (built as a checked packet first).
         let mut buf = [0u8; 256];

@@ -442,3 +442,152 @@ fn encoder_rejects_bad_requests() {
     let mut out = vec![0u8; 80_000];
     assert_eq!(write(&mut out, 1, 0, &big), Err(EncodeError::TooLong));
 }
+
+#[test]
+fn manual_instructions_decode_as_requests() {
+    let check = |wire: &str, f: &dyn Fn(Request<'_>)| {
+        let mut b = hex(wire);
+        let p = parse_in_place(&mut b).unwrap();
+        f(Request::from_packet(&p).unwrap());
+    };
+    check("FF FF FD 00 01 03 00 01 19 4E", &|r| {
+        assert_eq!(r, Request::Ping)
+    });
+    check("FF FF FD 00 01 07 00 02 84 00 04 00 1D 15", &|r| {
+        assert_eq!(r, Request::Read { addr: 132, len: 4 })
+    });
+    check("FF FF FD 00 01 09 00 03 74 00 00 02 00 00 CA 89", &|r| {
+        assert_eq!(
+            r,
+            Request::Write {
+                addr: 116,
+                data: &[0, 2, 0, 0]
+            }
+        )
+    });
+    check("FF FF FD 00 01 09 00 04 68 00 C8 00 00 00 AE 8E", &|r| {
+        assert_eq!(
+            r,
+            Request::RegWrite {
+                addr: 104,
+                data: &[200, 0, 0, 0]
+            }
+        )
+    });
+    check("FF FF FD 00 01 03 00 05 02 CE", &|r| {
+        assert_eq!(r, Request::Action)
+    });
+    check("FF FF FD 00 01 04 00 06 01 A1 E6", &|r| {
+        assert_eq!(r, Request::FactoryReset(1))
+    });
+    check("FF FF FD 00 01 03 00 08 2F 4E", &|r| {
+        assert_eq!(r, Request::Reboot)
+    });
+    check("FF FF FD 00 01 08 00 10 01 44 58 4C 22 B1 DC", &|r| {
+        assert_eq!(r, Request::ClearMultiTurn)
+    });
+    check("FF FF FD 00 01 08 00 20 02 43 54 52 4C 9E F5", &|r| {
+        assert_eq!(r, Request::ControlTableBackup(2))
+    });
+    check("FF FF FD 00 FE 09 00 82 84 00 04 00 01 02 CE FA", &|r| {
+        assert_eq!(
+            r,
+            Request::SyncRead {
+                fast: false,
+                addr: 132,
+                len: 4,
+                ids: &[1, 2]
+            }
+        )
+    });
+    check("FF FF FD 00 FE 0A 00 8A 84 00 04 00 03 07 04 20 F2", &|r| {
+        assert_eq!(
+            r,
+            Request::SyncRead {
+                fast: true,
+                addr: 132,
+                len: 4,
+                ids: &[3, 7, 4]
+            }
+        )
+    });
+    check(
+        "FF FF FD 00 FE 11 00 83 74 00 04 00 01 96 00 00 00 02 AA 00 00 00 82 87",
+        &|r| {
+            let e: Vec<_> = r.sync_write_entries().collect();
+            assert_eq!(
+                e,
+                vec![(1, &[0x96, 0, 0, 0][..]), (2, &[0xAA, 0, 0, 0][..])]
+            );
+        },
+    );
+    check(
+        "FF FF FD 00 FE 12 00 9A 03 84 00 04 00 07 7C 00 02 00 04 92 00 01 00 DA 2D",
+        &|r| {
+            assert!(matches!(r, Request::BulkRead { fast: true, .. }));
+            let e: Vec<_> = r
+                .bulk_read_entries()
+                .map(|e| (e.id, e.addr, e.len))
+                .collect();
+            assert_eq!(e, vec![(3, 132, 4), (7, 124, 2), (4, 146, 1)]);
+        },
+    );
+    check(
+        "FF FF FD 00 FE 10 00 93 01 20 00 02 00 A0 00 02 1F 00 01 00 50 B7 68",
+        &|r| {
+            let e: Vec<_> = r
+                .bulk_write_entries()
+                .map(|e| (e.id, e.addr, e.data.to_vec()))
+                .collect();
+            assert_eq!(e, vec![(1, 32, vec![0xA0, 0]), (2, 31, vec![0x50])]);
+        },
+    );
+}
+
+#[test]
+fn malformed_requests_are_typed_errors() {
+    let req = |id: u8, inst: u8, params: &[u8]| {
+        let mut w = vec![0xFF, 0xFF, 0xFD, 0x00, id, 0, 0, inst];
+        w.extend_from_slice(params);
+        let len = (params.len() + 3) as u16;
+        w[5..7].copy_from_slice(&len.to_le_bytes());
+        let c = dxl::crc::crc16(&w).to_le_bytes();
+        w.extend_from_slice(&c);
+        let p = parse_in_place(&mut w).unwrap();
+        Request::from_packet(&p).map(|_| ())
+    };
+    assert_eq!(
+        req(1, 0x02, &[0x84, 0x00, 0x04]),
+        Err(RequestError::Length(3))
+    );
+    assert_eq!(
+        req(1, 0x77, &[]),
+        Err(RequestError::UnknownInstruction(0x77))
+    );
+    assert_eq!(req(1, 0x55, &[0]), Err(RequestError::Status));
+    assert_eq!(
+        req(1, 0x82, &[0x84, 0, 4, 0, 1]),
+        Err(RequestError::NotBroadcast)
+    );
+    assert_eq!(
+        req(0xFE, 0x83, &[0x74, 0, 4, 0, 1, 0, 0, 0]),
+        Err(RequestError::Length(8))
+    );
+    assert_eq!(
+        req(0xFE, 0x93, &[1, 0x20, 0, 5, 0, 1]),
+        Err(RequestError::Length(6))
+    );
+    assert_eq!(
+        req(1, 0x10, &[1, 0x44, 0x58, 0x4C, 0x23]),
+        Err(RequestError::Key)
+    );
+    assert_eq!(req(0xFE, 0x92, &[]), Err(RequestError::Length(0)));
+}
+
+#[test]
+fn wire_length_helpers_match_the_encoders() {
+    assert_eq!(instruction_len(0), 10);
+    assert_eq!(status_len(4), 15); // SDK: len + 11
+    assert_eq!(fast_reply_len(3, 4), 32); // the manual's fast sync read reply
+    assert_eq!(fast_reply_len(0, 4), 0);
+}

@@ -1,4 +1,4 @@
-//! One-packet decoders: check_frame, parse_in_place, Status, PingInfo, FastReply.
+//! One-packet decoders: check_frame, parse_in_place, Status, PingInfo, Request, FastReply.
 #![no_main]
 use conductor_protocols::dynamixel2 as d2;
 use libfuzzer_sys::fuzz_target;
@@ -11,6 +11,11 @@ fuzz_target!(|input: &[u8]| {
             assert_eq!(checked, Ok(p.wire_len));
             if let Ok(s) = d2::Status::from_packet(&p) {
                 let _ = d2::PingInfo::from_status(&s);
+            }
+            if let Ok(r) = d2::Request::from_packet(&p) {
+                let n = r.sync_write_entries().count() + r.bulk_read_entries().count();
+                let m = r.bulk_write_entries().map(|e| e.data.len()).sum::<usize>();
+                assert!(n + m <= p.params.len());
             }
             if let Ok(r) = d2::FastReply::from_packet(&p) {
                 let lens = input.iter().map(|&b| (b % 9) as usize);

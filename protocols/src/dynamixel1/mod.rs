@@ -4,7 +4,7 @@
 //! `LEN = params + 2`, `CHK = !(ID + LEN + INST/ERR + Σparams)` (low byte). No stuffing, no
 //! reserved byte; IDs 0–253, broadcast 0xFE.
 //!
-//! Encoders: [`ping`], [`read`], [`write`], [`reg_write`], [`action`], [`reset`],
+//! Encoders: [`ping`], [`read`], [`write()`], [`reg_write`], [`action`], [`reset`],
 //! [`sync_write`], [`bulk_read`] (MX only), and [`status`] for simulators. Decoding:
 //! [`Scanner`] (byte stream → checked [`Packet`]s), [`parse`] (one packet),
 //! [`Status`] and [`ErrorBits`].

@@ -4,19 +4,23 @@
 //! little-endian fields, byte stuffing over the instruction/parameter region and a
 //! CRC-16/UMTS over the stuffed bytes ([`crc`]).
 //!
-//! * Encoding (host side): [`ping`], [`read`], [`write`], [`reg_write`], [`action`],
+//! * Encoding (host side): [`ping`], [`read`], [`write()`], [`reg_write`], [`action`],
 //!   [`factory_reset`], [`reboot`], [`clear_multi_turn`], [`control_table_backup`],
 //!   [`sync_read`], [`sync_write`], [`fast_sync_read`], [`bulk_read`], [`bulk_write`],
 //!   [`fast_bulk_read`].
 //! * Encoding (servo/simulator side): [`status`], [`fast_status`].
 //! * Decoding: [`Scanner`] turns a byte stream into [`Packet`]s (stuffing removed);
 //!   [`parse_in_place`] does the same for one packet in a buffer. [`Status`], [`PingInfo`] and
-//!   [`FastReply`] interpret them; [`ErrorByte`] decodes the status error byte.
+//!   [`FastReply`] interpret them; [`ErrorByte`] decodes the status error byte; [`Request`]
+//!   decodes instruction packets (servo/simulator side).
+//! * Wire sizes for timeouts and bus budgets: [`instruction_len`], [`status_len`],
+//!   [`fast_reply_len`] (without stuffing, which can only add bytes).
 
 pub mod crc;
 mod encode;
 mod fast;
 mod packet;
+mod request;
 mod scanner;
 pub mod stuffing;
 
@@ -31,6 +35,7 @@ pub use packet::{
     check_frame, parse_in_place, DeviceError, ErrorByte, Packet, ParseError, PingInfo, Status,
     StatusError,
 };
+pub use request::{BulkWriteEntries, Request, RequestError};
 pub use scanner::Scanner;
 
 /// The four bytes every packet starts with (`FF FF FD` plus the reserved `00`).
@@ -41,6 +46,26 @@ pub const BROADCAST_ID: u8 = 0xFE;
 pub const MAX_DEVICE_ID: u8 = 0xFC;
 /// Bytes of a packet that are not parameters: header(4), ID, LEN(2), INST, CRC(2).
 pub const OVERHEAD: usize = 10;
+
+/// Wire length of an instruction packet with `params` parameter bytes (before stuffing).
+pub const fn instruction_len(params: usize) -> usize {
+    OVERHEAD + params
+}
+
+/// Wire length of a status packet carrying `data` bytes (error byte included; before stuffing).
+/// DynamixelSDK's read timeout uses the same `data + 11`.
+pub const fn status_len(data: usize) -> usize {
+    OVERHEAD + 1 + data
+}
+
+/// Wire length of the combined reply to a fast read of `devices` devices with `data` bytes
+/// each (never stuffed).
+pub const fn fast_reply_len(devices: usize, data: usize) -> usize {
+    if devices == 0 {
+        return 0;
+    }
+    OVERHEAD + devices * (4 + data) - 2
+}
 
 /// Instruction codes (protocol2.md, newest).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
