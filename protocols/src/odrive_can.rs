@@ -14,35 +14,62 @@ use embedded_can::{Frame, Id, StandardId};
 /// Command IDs (low 5 bits of the arbitration ID), firmware 0.6.x.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
-#[allow(missing_docs)]
 pub enum CmdId {
+    /// `0x00`.
     GetVersion = 0x00,
+    /// `0x01`.
     Heartbeat = 0x01,
+    /// `0x02`.
     Estop = 0x02,
+    /// `0x03`.
     GetError = 0x03,
+    /// `0x04`.
     RxSdo = 0x04,
+    /// `0x05`.
     TxSdo = 0x05,
+    /// `0x06`.
     Address = 0x06,
+    /// `0x07`.
     SetAxisState = 0x07,
+    /// `0x09`.
     GetEncoderEstimates = 0x09,
+    /// `0x0B`.
     SetControllerMode = 0x0B,
+    /// `0x0C`.
     SetInputPos = 0x0C,
+    /// `0x0D`.
     SetInputVel = 0x0D,
+    /// `0x0E`.
     SetInputTorque = 0x0E,
+    /// `0x0F`.
     SetLimits = 0x0F,
+    /// `0x11`.
     SetTrajVelLimit = 0x11,
+    /// `0x12`.
     SetTrajAccelLimits = 0x12,
+    /// `0x13`.
     SetTrajInertia = 0x13,
+    /// `0x14`.
     GetIq = 0x14,
+    /// `0x15`.
     GetTemperature = 0x15,
+    /// `0x16`.
     Reboot = 0x16,
+    /// `0x17`.
     GetBusVoltageCurrent = 0x17,
+    /// `0x18`.
     ClearErrors = 0x18,
+    /// `0x19`.
     SetAbsolutePosition = 0x19,
+    /// `0x1A`.
     SetPosGain = 0x1A,
+    /// `0x1B`.
     SetVelGains = 0x1B,
+    /// `0x1C`.
     GetTorques = 0x1C,
+    /// `0x1D`.
     GetPowers = 0x1D,
+    /// `0x1F`.
     EnterDfuMode = 0x1F,
 }
 
@@ -172,120 +199,198 @@ pub fn split_id(id: u16) -> (u8, u8) {
 
 /// The 0.6.x messages with their fields (units as in ODrive's docs: rev, rev/s, N·m, A, V).
 #[derive(Debug, Clone, Copy, PartialEq)]
-#[allow(missing_docs)]
 pub enum Message {
+    /// 0x00 Get_Version: protocol, hardware and firmware versions.
     GetVersion {
+        /// CAN protocol version.
         protocol_version: u8,
+        /// Hardware major version.
         hw_major: u8,
+        /// Hardware minor version.
         hw_minor: u8,
+        /// Hardware variant.
         hw_variant: u8,
+        /// Firmware major version.
         fw_major: u8,
+        /// Firmware minor version.
         fw_minor: u8,
+        /// Firmware revision.
         fw_revision: u8,
+        /// Non-zero for an unreleased firmware.
         fw_unreleased: u8,
     },
+    /// 0x01 Heartbeat (cyclic): axis error, state, procedure result, trajectory done.
     Heartbeat {
+        /// Axis error bits.
         axis_error: u32,
+        /// Current axis state.
         axis_state: u8,
+        /// Result of the last procedure.
         procedure_result: u8,
+        /// Trajectory finished.
         trajectory_done: bool,
     },
+    /// 0x02 Estop (DLC 0).
     Estop,
+    /// 0x03 Get_Error: active errors and disarm reason.
     GetError {
+        /// Active error bits.
         active_errors: u32,
+        /// Error bits that disarmed the axis.
         disarm_reason: u32,
     },
     /// Arbitrary parameter access request.
     RxSdo {
+        /// 0 read, 1 write.
         opcode: u8,
+        /// Endpoint (parameter) ID.
         endpoint_id: u16,
+        /// Value bytes, little-endian.
         value: [u8; 4],
     },
     /// Arbitrary parameter access reply.
     TxSdo {
+        /// 0 read, 1 write.
         opcode: u8,
+        /// Endpoint (parameter) ID.
         endpoint_id: u16,
+        /// Value bytes, little-endian.
         value: [u8; 4],
     },
     /// Node ID and 48-bit serial number.
     Address {
+        /// Node ID.
         node_id: u8,
+        /// 48-bit serial number.
         serial_number: u64,
     },
+    /// 0x07 Set_Axis_State (8 = closed loop, 1 = idle; see [`axis_state`]).
     SetAxisState {
+        /// Requested axis state.
         requested_state: u32,
     },
+    /// 0x09 Get_Encoder_Estimates (cyclic): position (rev), velocity (rev/s).
     GetEncoderEstimates {
+        /// Position (rev).
         pos: f32,
+        /// Velocity (rev/s).
         vel: f32,
     },
+    /// 0x0B Set_Controller_Mode (see [`control_mode`], [`input_mode`]).
     SetControllerMode {
+        /// Control mode.
         control_mode: u32,
+        /// Input mode.
         input_mode: u32,
     },
     /// `vel_ff` and `torque_ff` travel as i16 × 0.001 (rounded).
     SetInputPos {
+        /// Position (rev).
         pos: f32,
+        /// Velocity feed-forward (rev/s), 0.001 resolution.
         vel_ff: f32,
+        /// Torque feed-forward (N·m).
         torque_ff: f32,
     },
+    /// 0x0D Set_Input_Vel: velocity (rev/s) and torque feed-forward (N·m).
     SetInputVel {
+        /// Velocity (rev/s).
         vel: f32,
+        /// Torque feed-forward (N·m).
         torque_ff: f32,
     },
+    /// 0x0E Set_Input_Torque (N·m).
     SetInputTorque {
+        /// Torque (N·m).
         torque: f32,
     },
+    /// 0x0F Set_Limits: velocity (rev/s) and current (A) limits.
     SetLimits {
+        /// Velocity limit (rev/s).
         velocity_limit: f32,
+        /// Current limit (A).
         current_limit: f32,
     },
+    /// 0x11 Set_Traj_Vel_Limit (rev/s).
     SetTrajVelLimit {
+        /// Limit.
         limit: f32,
     },
+    /// 0x12 Set_Traj_Accel_Limits (rev/s²).
     SetTrajAccelLimits {
+        /// Acceleration limit.
         accel: f32,
+        /// Deceleration limit.
         decel: f32,
     },
+    /// 0x13 Set_Traj_Inertia (N·m/(rev/s²)).
     SetTrajInertia {
+        /// Inertia.
         inertia: f32,
     },
+    /// 0x14 Get_Iq: setpoint and measured (A).
     GetIq {
+        /// Setpoint (A).
         setpoint: f32,
+        /// Measured (A).
         measured: f32,
     },
+    /// 0x15 Get_Temperature: FET and motor (°C).
     GetTemperature {
+        /// FET temperature (°C).
         fet: f32,
+        /// Motor temperature (°C).
         motor: f32,
     },
+    /// 0x16 Reboot (DLC 1).
     Reboot {
+        /// Reboot action code.
         action: u8,
     },
+    /// 0x17 Get_Bus_Voltage_Current: (V), (A).
     GetBusVoltageCurrent {
+        /// Bus voltage (V).
         voltage: f32,
+        /// Bus current (A).
         current: f32,
     },
+    /// 0x18 Clear_Errors (DLC 1).
     ClearErrors {
+        /// Non-zero to also blink the LED.
         identify: u8,
     },
+    /// 0x19 Set_Absolute_Position (rev).
     SetAbsolutePosition {
+        /// Position (rev).
         position: f32,
     },
+    /// 0x1A Set_Pos_Gain ((rev/s)/rev).
     SetPosGain {
+        /// Gain.
         gain: f32,
     },
+    /// 0x1B Set_Vel_Gains: (N·m/(rev/s)), (N·m/rev).
     SetVelGains {
+        /// Velocity gain.
         vel_gain: f32,
+        /// Velocity integrator gain.
         vel_integrator_gain: f32,
     },
+    /// 0x1C Get_Torques: target and estimate (N·m).
     GetTorques {
+        /// Target (N·m).
         target: f32,
+        /// Estimate (N·m).
         estimate: f32,
     },
+    /// 0x1D Get_Powers: electrical and mechanical (W).
     GetPowers {
+        /// Electrical power (W).
         electrical: f32,
+        /// Mechanical power (W).
         mechanical: f32,
     },
+    /// 0x1F Enter_DFU_Mode (DLC 0).
     EnterDfuMode,
 }
 
