@@ -150,15 +150,18 @@ pub enum MitError {
 }
 
 /// Katz's `float_to_uint`: clamp to the range, scale onto `2^bits - 1` steps in f32, truncate.
+/// `bits` is at most 16 (larger values are treated as 16).
 pub fn float_to_uint(x: f32, r: Range, bits: u32) -> u16 {
+    let bits = bits.min(16);
     let steps = ((1u32 << bits) - 1) as f32;
     let x = x.clamp(r.min, r.max);
     let n = ((x - r.min) * steps / (r.max - r.min)) as u32;
     n.min((1 << bits) - 1) as u16
 }
 
-/// Katz's `uint_to_float`.
+/// Katz's `uint_to_float` (`bits` at most 16, larger values are treated as 16).
 pub fn uint_to_float(n: u16, r: Range, bits: u32) -> f32 {
+    let bits = bits.min(16);
     let steps = ((1u32 << bits) - 1) as f32;
     n as f32 * (r.max - r.min) / steps + r.min
 }
