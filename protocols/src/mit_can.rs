@@ -154,7 +154,8 @@ pub enum MitError {
 pub fn float_to_uint(x: f32, r: Range, bits: u32) -> u16 {
     let bits = bits.min(16);
     let steps = ((1u32 << bits) - 1) as f32;
-    let x = x.clamp(r.min, r.max);
+    // max/min rather than clamp: clamp panics on an inverted or NaN range.
+    let x = x.max(r.min).min(r.max);
     let n = ((x - r.min) * steps / (r.max - r.min)) as u32;
     n.min((1 << bits) - 1) as u16
 }
