@@ -277,6 +277,12 @@ proptest! {
         }
         let _ = Response::decode(Line { body: &bytes, terminator: slcan::CR });
         let _ = Response::decode(Line { body: &bytes, terminator: slcan::BEL });
+        if bytes.len() >= 13 {
+            let f = |i: usize| f32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
+            let r = mit_can::Range { min: f(4), max: f(8) };
+            let n = mit_can::float_to_uint(f(0), r, u32::from(bytes[12]));
+            let _ = mit_can::uint_to_float(n, r, u32::from(bytes[12]));
+        }
         let l = Limits { p: mit_can::Range { min: f32::NAN, max: 1.0 }, ..Model::Ak10_9.limits() };
         prop_assert_eq!(Reply::decode(&[0; 6], &l), Err(mit_can::MitError::InvalidLimits));
     }
