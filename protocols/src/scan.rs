@@ -1,0 +1,312 @@
+//! Discard accounting shared by the stream scanners, and the framing engine behind the two
+//! Dynamixel scanners.
+//!
+//! # The accounting invariant
+//!
+//! Every byte a scanner accepts ends up in exactly one place:
+//!
+//! ```text
+//! stats.bytes_in == stats.packet_bytes + stats.discarded_bytes() + scanner.buffered()
+//! ```
+//!
+//! and the counts do not depend on how the input was chunked (feeding a stream one byte at a
+//! time or all at once gives the same packets and the same [`ScanStats`]), provided `expire` is
+//! called at the same points of the stream.
+//!
+//! # How the binary scanners decide
+//!
+//! A *candidate* is a position where the protocol header (`FF FF FD 00` for 2.0, `FF FF` for 1.0)
+//! starts. Bytes before the first position that could start a header are **garbage**. At a
+//! candidate the scanner reads the ID and length fields:
+//!
+//! * invalid ID or length → **bad_header**;
+//! * a total length above the scanner's maximum → **oversize**;
+//! * otherwise it waits for the whole packet and checks its CRC/checksum: a mismatch is
+//!   **bad_crc**, a match is yielded as a packet.
+//!
+//! A rejected candidate discards its *examined* bytes (the header fields for bad_header and
+//! oversize, the whole claimed packet for bad_crc), but never past the next position inside them
+//! where a complete header starts: a reply whose predecessor lost a byte is still found. When the
+//! decision depends on bytes that have not arrived yet, the scanner waits for them.
+//!
+//! `expire()` tells the scanner that the line has gone quiet (the reply timeout passed): a
+//! candidate (a complete header) still waiting for bytes is then discarded as **truncated**,
+//! and scanning resumes after it, so complete packets behind a truncated one are still
+//! yielded. A trailing fragment shorter than the header is garbage.
+
+/// Bytes and occurrences discarded for one cause.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Tally {
+    /// Number of bytes discarded.
+    pub bytes: u64,
+    /// Number of discard events: one per rejected candidate (or malformed line); for garbage,
+    /// one per maximal run of consecutive garbage bytes in the stream.
+    pub events: u64,
+}
+
+impl Tally {
+    pub(crate) fn add(&mut self, bytes: usize, new_event: bool) {
+        self.bytes += bytes as u64;
+        if new_event {
+            self.events += 1;
+        }
+    }
+}
+
+/// Counters of a binary packet scanner ([`dynamixel2::Scanner`](crate::dynamixel2::Scanner),
+/// [`dynamixel1::Scanner`](crate::dynamixel1::Scanner)). See the [module docs](self) for the
+/// exact meaning of each cause and the accounting invariant.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ScanStats {
+    /// Bytes accepted by `push`/`feed`.
+    pub bytes_in: u64,
+    /// Packets yielded (integrity check passed).
+    pub packets: u64,
+    /// Wire bytes of the yielded packets.
+    pub packet_bytes: u64,
+    /// Bytes that cannot be the start of a packet (noise, or the tail of a packet whose header
+    /// was lost).
+    pub garbage: Tally,
+    /// Header bytes of candidates whose ID or length field is invalid.
+    pub bad_header: Tally,
+    /// Header bytes of candidates whose length exceeds the scanner's maximum packet size.
+    pub oversize: Tally,
+    /// Bytes of complete candidates whose CRC (2.0) or checksum (1.0) did not match.
+    pub bad_crc: Tally,
+    /// Bytes of candidates still incomplete when `expire()` was called.
+    pub truncated: Tally,
+}
+
+impl ScanStats {
+    /// Total bytes discarded, all causes.
+    pub fn discarded_bytes(&self) -> u64 {
+        self.garbage.bytes
+            + self.bad_header.bytes
+            + self.oversize.bytes
+            + self.bad_crc.bytes
+            + self.truncated.bytes
+    }
+
+    /// Total rejected candidates (bad_header + oversize + bad_crc + truncated events): each is
+    /// a packet, or something that looked like one, that was not yielded.
+    pub fn rejected_packets(&self) -> u64 {
+        self.bad_header.events + self.oversize.events + self.bad_crc.events + self.truncated.events
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Cause {
+    Garbage,
+    BadHeader,
+    Oversize,
+    BadCrc,
+    Truncated,
+}
+
+/// What a binary protocol tells the engine about its framing.
+pub(crate) trait Framing {
+    /// The fixed bytes every packet starts with.
+    const HEADER: &'static [u8];
+    /// How many leading bytes determine the total length (header, ID, length field).
+    const FIELDS_LEN: usize;
+    /// Total packet length from the first `FIELDS_LEN` bytes, or `None` if a field is invalid.
+    fn total_len(fields: &[u8]) -> Option<usize>;
+    /// Integrity check over a complete candidate.
+    fn check(packet: &[u8]) -> bool;
+}
+
+/// Where a header could start.
+enum HeaderAt {
+    /// A complete header starts here.
+    Full(usize),
+    /// The buffer ends inside a header prefix starting here: undecided until more bytes arrive.
+    Partial(usize),
+    None,
+}
+
+/// First position in `from..limit` where `header` starts, completely or as a prefix cut off by
+/// the end of `data`. With `flush`, cut-off prefixes do not count (no more bytes will come).
+fn find_header(data: &[u8], header: &[u8], from: usize, limit: usize, flush: bool) -> HeaderAt {
+    let limit = limit.min(data.len());
+    for i in from..limit {
+        let rest = &data[i..];
+        let n = rest.len().min(header.len());
+        if rest[..n] == header[..n] {
+            if n == header.len() {
+                return HeaderAt::Full(i);
+            }
+            if !flush {
+                return HeaderAt::Partial(i);
+            }
+        }
+    }
+    HeaderAt::None
+}
+
+/// Fixed-capacity framing engine shared by the binary scanners.
+pub(crate) struct Engine<const N: usize> {
+    buf: [u8; N],
+    start: usize,
+    end: usize,
+    /// Length of the packet last yielded; it stays in `buf` until the next call.
+    pending: usize,
+    max_packet: usize,
+    flush: bool,
+    garbage_run: bool,
+    stats: ScanStats,
+}
+
+impl<const N: usize> Engine<N> {
+    /// `max_packet` is clamped so that every decision fits the buffer: a rejected candidate may
+    /// need up to `header_len - 1` bytes past its end to find the next header.
+    pub(crate) fn new(max_packet: usize, header_len: usize) -> Self {
+        let cap = N.saturating_sub(header_len.saturating_sub(1));
+        Self {
+            buf: [0; N],
+            start: 0,
+            end: 0,
+            pending: 0,
+            max_packet: max_packet.min(cap),
+            flush: false,
+            garbage_run: false,
+            stats: ScanStats::default(),
+        }
+    }
+
+    pub(crate) fn max_packet(&self) -> usize {
+        self.max_packet
+    }
+
+    pub(crate) fn stats(&self) -> &ScanStats {
+        &self.stats
+    }
+
+    pub(crate) fn buffered(&self) -> usize {
+        self.end - self.start - self.pending
+    }
+
+    fn consume_pending(&mut self) {
+        self.start += self.pending;
+        self.pending = 0;
+        if self.start == self.end {
+            self.start = 0;
+            self.end = 0;
+        }
+    }
+
+    pub(crate) fn push(&mut self, data: &[u8]) -> usize {
+        self.consume_pending();
+        self.flush = false;
+        if self.start > 0 && self.end + data.len() > N {
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+        }
+        let n = data.len().min(N - self.end);
+        self.buf[self.end..self.end + n].copy_from_slice(&data[..n]);
+        self.end += n;
+        self.stats.bytes_in += n as u64;
+        n
+    }
+
+    pub(crate) fn expire(&mut self) {
+        self.flush = true;
+    }
+
+    pub(crate) fn buf_mut(&mut self) -> &mut [u8; N] {
+        &mut self.buf
+    }
+
+    fn discard(&mut self, n: usize, cause: Cause) {
+        let garbage_run = self.garbage_run;
+        let s = &mut self.stats;
+        match cause {
+            Cause::Garbage => s.garbage.add(n, !garbage_run),
+            Cause::BadHeader => s.bad_header.add(n, true),
+            Cause::Oversize => s.oversize.add(n, true),
+            Cause::BadCrc => s.bad_crc.add(n, true),
+            Cause::Truncated => s.truncated.add(n, true),
+        }
+        self.garbage_run = cause == Cause::Garbage;
+        self.start += n;
+    }
+
+    /// Rejects the candidate at the head: discards its first `limit` bytes, or fewer if a
+    /// complete header starts inside them. Returns false if that cannot be decided yet.
+    fn reject<F: Framing>(&mut self, cause: Cause, limit: usize) -> bool {
+        let data = &self.buf[self.start..self.end];
+        let cut = match find_header(data, F::HEADER, 1, limit, self.flush) {
+            HeaderAt::Full(k) => k,
+            HeaderAt::Partial(_) => return false,
+            HeaderAt::None => limit.min(data.len()),
+        };
+        self.discard(cut, cause);
+        true
+    }
+
+    /// Scans for the next complete, checked packet and returns its range in the buffer.
+    pub(crate) fn next_frame<F: Framing>(&mut self) -> Option<core::ops::Range<usize>> {
+        self.consume_pending();
+        loop {
+            let avail = self.end - self.start;
+            if avail == 0 {
+                self.start = 0;
+                self.end = 0;
+                return None;
+            }
+            let data = &self.buf[self.start..self.end];
+            match find_header(data, F::HEADER, 0, avail, self.flush) {
+                HeaderAt::Full(0) | HeaderAt::Partial(0) => {}
+                HeaderAt::Full(i) | HeaderAt::Partial(i) => {
+                    self.discard(i, Cause::Garbage);
+                    continue;
+                }
+                HeaderAt::None => {
+                    self.discard(avail, Cause::Garbage);
+                    continue;
+                }
+            }
+            if avail < F::FIELDS_LEN {
+                if self.flush {
+                    self.discard(avail, Cause::Truncated);
+                    continue;
+                }
+                return None;
+            }
+            let total = match F::total_len(&data[..F::FIELDS_LEN]) {
+                None => {
+                    if self.reject::<F>(Cause::BadHeader, F::FIELDS_LEN) {
+                        continue;
+                    }
+                    return None;
+                }
+                Some(t) if t > self.max_packet => {
+                    if self.reject::<F>(Cause::Oversize, F::FIELDS_LEN) {
+                        continue;
+                    }
+                    return None;
+                }
+                Some(t) => t,
+            };
+            if avail < total {
+                if self.flush {
+                    // Resolved with flush semantics, so this always discards.
+                    self.reject::<F>(Cause::Truncated, avail);
+                    continue;
+                }
+                return None;
+            }
+            if !F::check(&data[..total]) {
+                if self.reject::<F>(Cause::BadCrc, total) {
+                    continue;
+                }
+                return None;
+            }
+            self.stats.packets += 1;
+            self.stats.packet_bytes += total as u64;
+            self.garbage_run = false;
+            self.pending = total;
+            return Some(self.start..self.start + total);
+        }
+    }
+}

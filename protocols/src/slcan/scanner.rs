@@ -1,0 +1,357 @@
+//! Line scanners: bytes in any chunking → lines → responses (host) or commands (adapter).
+//!
+//! Accounting, as for the binary scanners:
+//! `bytes_in == line_bytes + discarded_bytes() + buffered()`, independent of chunking
+//! (given the same `expire` points). A line's bytes include its terminator.
+
+use super::response::{parse, Parsed};
+use super::{Command, Dialect, Response, SlcanError, BEL, CR};
+use crate::scan::Tally;
+
+/// One line: its body and the terminator that ended it (CR or BEL).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Line<'a> {
+    /// Bytes before the terminator.
+    pub body: &'a [u8],
+    /// [`CR`] or [`BEL`].
+    pub terminator: u8,
+}
+
+/// Counters of the SLCAN scanners.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct LineStats {
+    /// Bytes accepted.
+    pub bytes_in: u64,
+    /// Lines delivered (as a response, a command, or a raw line).
+    pub lines: u64,
+    /// Bytes of the delivered lines, terminators included.
+    pub line_bytes: u64,
+    /// Lines whose first character is known but whose syntax is wrong (bad hex, length, DLC,
+    /// ID range, bitrate digit), and text before a BEL (the BEL itself is delivered as
+    /// [`Response::Error`]).
+    pub malformed: Tally,
+    /// Lines starting with a character this side does not know (e.g. CAN FD frames).
+    pub unknown: Tally,
+    /// Lines longer than the scanner's capacity, discarded up to and including their
+    /// terminator (one event per line).
+    pub overlong: Tally,
+    /// An unterminated line still buffered when `expire()` was called.
+    pub truncated: Tally,
+}
+
+impl LineStats {
+    /// All bytes discarded.
+    pub fn discarded_bytes(&self) -> u64 {
+        self.malformed.bytes + self.unknown.bytes + self.overlong.bytes + self.truncated.bytes
+    }
+}
+
+/// Splits a byte stream into CR- or BEL-terminated lines of at most `N - 1` body bytes.
+pub struct LineScanner<const N: usize = 64> {
+    buf: [u8; N],
+    start: usize,
+    end: usize,
+    pending: usize,
+    /// Inside an overlong line: drop bytes up to the next terminator.
+    skipping: bool,
+    flush: bool,
+    stats: LineStats,
+}
+
+impl<const N: usize> Default for LineScanner<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+fn is_terminator(b: u8) -> bool {
+    b == CR || b == BEL
+}
+
+impl<const N: usize> LineScanner<N> {
+    const MIN_CAPACITY: () = assert!(N >= 2, "line scanner capacity must be at least 2");
+
+    /// An empty scanner.
+    pub fn new() -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::MIN_CAPACITY;
+        Self {
+            buf: [0; N],
+            start: 0,
+            end: 0,
+            pending: 0,
+            skipping: false,
+            flush: false,
+            stats: LineStats::default(),
+        }
+    }
+
+    fn consume_pending(&mut self) {
+        self.start += self.pending;
+        self.pending = 0;
+        if self.start == self.end {
+            self.start = 0;
+            self.end = 0;
+        }
+    }
+
+    /// Copies as many bytes as fit; returns how many were taken. After
+    /// [`next_line`](Self::next_line) has returned `None` at least one byte always fits.
+    pub fn push(&mut self, data: &[u8]) -> usize {
+        self.consume_pending();
+        self.flush = false;
+        if self.start > 0 && self.end + data.len() > N {
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+        }
+        let n = data.len().min(N - self.end);
+        self.buf[self.end..self.end + n].copy_from_slice(&data[..n]);
+        self.end += n;
+        self.stats.bytes_in += n as u64;
+        n
+    }
+
+    /// No more bytes are coming for the buffered partial line: it is discarded as truncated
+    /// by the next [`next_line`](Self::next_line). The next `push` ends this.
+    pub fn expire(&mut self) {
+        self.flush = true;
+    }
+
+    fn drop_bytes(&mut self, n: usize) {
+        self.start += n;
+        if self.start == self.end {
+            self.start = 0;
+            self.end = 0;
+        }
+    }
+
+    /// The next complete line as (body range, terminator); the line is consumed by the next
+    /// call.
+    pub(crate) fn next_range(&mut self) -> Option<(core::ops::Range<usize>, u8)> {
+        self.consume_pending();
+        loop {
+            let data = &self.buf[self.start..self.end];
+            let term = data.iter().position(|&b| is_terminator(b));
+            if self.skipping {
+                let n = term.map_or(data.len(), |i| i + 1);
+                self.stats.overlong.bytes += n as u64;
+                self.drop_bytes(n);
+                term?;
+                self.skipping = false;
+                continue;
+            }
+            match term {
+                Some(i) => {
+                    let t = data[i];
+                    self.stats.lines += 1;
+                    self.stats.line_bytes += i as u64 + 1;
+                    self.pending = i + 1;
+                    return Some((self.start..self.start + i, t));
+                }
+                None if data.len() >= N => {
+                    self.stats.overlong.events += 1;
+                    self.skipping = true;
+                }
+                None if self.flush && !data.is_empty() => {
+                    self.stats.truncated.add(data.len(), true);
+                    let n = data.len();
+                    self.drop_bytes(n);
+                    return None;
+                }
+                None => return None,
+            }
+        }
+    }
+
+    /// The next complete line, borrowed until the next call.
+    pub fn next_line(&mut self) -> Option<Line<'_>> {
+        let (r, terminator) = self.next_range()?;
+        Some(Line {
+            body: &self.buf[r],
+            terminator,
+        })
+    }
+
+    /// Counters since creation.
+    pub fn stats(&self) -> &LineStats {
+        &self.stats
+    }
+
+    /// Bytes accepted but not yet delivered or discarded.
+    pub fn buffered(&self) -> usize {
+        self.end - self.start - self.pending
+    }
+
+    /// Moves a delivered line into a discard cause (used by the parsing scanners).
+    fn reclassify(&mut self, bytes: usize, malformed: bool) {
+        self.stats.lines -= 1;
+        self.stats.line_bytes -= bytes as u64;
+        if malformed {
+            self.stats.malformed.add(bytes, true);
+        } else {
+            self.stats.unknown.add(bytes, true);
+        }
+    }
+}
+
+/// Host side: adapter bytes → [`Response`]s. Lines that do not parse are counted and skipped.
+///
+/// ```
+/// use conductor_protocols::slcan::{HostScanner, Response};
+/// let mut s = HostScanner::<64>::new();
+/// s.push(b"\rt1230\rz\r\x07");
+/// assert_eq!(s.next_response(), Some(Response::Ok));
+/// assert!(matches!(s.next_response(), Some(Response::Frame { .. })));
+/// assert_eq!(s.next_response(), Some(Response::TxAck { extended: false }));
+/// assert_eq!(s.next_response(), Some(Response::Error));
+/// assert_eq!(s.next_response(), None);
+/// ```
+pub struct HostScanner<const N: usize = 64> {
+    lines: LineScanner<N>,
+}
+
+impl<const N: usize> Default for HostScanner<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> HostScanner<N> {
+    /// An empty scanner.
+    pub fn new() -> Self {
+        Self {
+            lines: LineScanner::new(),
+        }
+    }
+
+    /// See [`LineScanner::push`].
+    pub fn push(&mut self, data: &[u8]) -> usize {
+        self.lines.push(data)
+    }
+
+    /// See [`LineScanner::expire`].
+    pub fn expire(&mut self) {
+        self.lines.expire();
+    }
+
+    /// The next well-formed response, borrowed until the next call.
+    pub fn next_response(&mut self) -> Option<Response<'_>> {
+        let (range, parsed) = loop {
+            let (r, term) = self.lines.next_range()?;
+            let line = super::Line {
+                body: &self.lines.buf[r.clone()],
+                terminator: term,
+            };
+            match parse(line) {
+                Ok(p) => break (r, p),
+                Err(SlcanError::Bel) => {
+                    // Text before a BEL is malformed; the BEL itself is the error reply.
+                    let n = r.len();
+                    self.lines.stats.line_bytes -= n as u64;
+                    self.lines.stats.malformed.add(n, true);
+                    break (r.end..r.end, Parsed::Error);
+                }
+                Err(e) => self
+                    .lines
+                    .reclassify(r.len() + 1, !matches!(e, SlcanError::Unknown(_))),
+            }
+        };
+        Some(parsed.resolve(&self.lines.buf[range]))
+    }
+
+    /// Pushes all of `bytes`, calling `on_response` for each response.
+    pub fn feed(&mut self, mut bytes: &[u8], mut on_response: impl FnMut(Response<'_>)) {
+        loop {
+            let n = self.push(bytes);
+            bytes = &bytes[n..];
+            while let Some(r) = self.next_response() {
+                on_response(r);
+            }
+            if bytes.is_empty() {
+                return;
+            }
+        }
+    }
+
+    /// Counters since creation.
+    pub fn stats(&self) -> &LineStats {
+        self.lines.stats()
+    }
+
+    /// Bytes accepted but not yet delivered or discarded.
+    pub fn buffered(&self) -> usize {
+        self.lines.buffered()
+    }
+}
+
+/// Adapter side (simulators): host bytes → [`Command`]s. A line that does not parse is
+/// returned as `Err` (the adapter answers BEL) and counted as malformed/unknown.
+pub struct DeviceScanner<const N: usize = 64> {
+    lines: LineScanner<N>,
+    dialect: Dialect,
+}
+
+impl<const N: usize> DeviceScanner<N> {
+    /// An empty scanner decoding `Sn` in `dialect`.
+    pub fn new(dialect: Dialect) -> Self {
+        Self {
+            lines: LineScanner::new(),
+            dialect,
+        }
+    }
+
+    /// See [`LineScanner::push`].
+    pub fn push(&mut self, data: &[u8]) -> usize {
+        self.lines.push(data)
+    }
+
+    /// See [`LineScanner::expire`].
+    pub fn expire(&mut self) {
+        self.lines.expire();
+    }
+
+    /// The next command line, decoded.
+    pub fn next_command(&mut self) -> Option<Result<Command, SlcanError>> {
+        let (r, term) = self.lines.next_range()?;
+        let body = &self.lines.buf[r.clone()];
+        let result = if term == BEL {
+            Err(SlcanError::Bel)
+        } else {
+            Command::decode(body, &self.dialect)
+        };
+        if let Err(e) = result {
+            self.lines
+                .reclassify(r.len() + 1, !matches!(e, SlcanError::Unknown(_)));
+        }
+        Some(result)
+    }
+
+    /// Pushes all of `bytes`, calling `on_command` for each line.
+    pub fn feed(
+        &mut self,
+        mut bytes: &[u8],
+        mut on_command: impl FnMut(Result<Command, SlcanError>),
+    ) {
+        loop {
+            let n = self.push(bytes);
+            bytes = &bytes[n..];
+            while let Some(c) = self.next_command() {
+                on_command(c);
+            }
+            if bytes.is_empty() {
+                return;
+            }
+        }
+    }
+
+    /// Counters since creation.
+    pub fn stats(&self) -> &LineStats {
+        self.lines.stats()
+    }
+
+    /// Bytes accepted but not yet delivered or discarded.
+    pub fn buffered(&self) -> usize {
+        self.lines.buffered()
+    }
+}
