@@ -40,13 +40,15 @@ impl LineBuffer {
 
     /// Feeds one received byte.
     pub fn push(&mut self, b: u8) -> LineEvent {
+        let was_cr = core::mem::replace(&mut self.last_cr, b == b'\r');
+        if b == b'\n' && was_cr {
+            return LineEvent::None;
+        }
         if self.ready {
             self.ready = false;
             self.len = 0;
         }
-        let was_cr = core::mem::replace(&mut self.last_cr, b == b'\r');
         match b {
-            b'\n' if was_cr => LineEvent::None,
             b'\r' | b'\n' => {
                 self.ready = true;
                 LineEvent::Line
