@@ -798,7 +798,12 @@ impl<N: Real> Engine<N> {
         let mut suffix = ShortStr::<4>::new();
         channel_suffix(&mut suffix, input);
         let raw_name = join("ADC", suffix.as_str());
-        let volts_name = join("adc", suffix.as_str());
+        let mut lower = [0u8; 4];
+        let sfx = suffix.as_str().as_bytes();
+        for (d, c) in lower.iter_mut().zip(sfx) {
+            *d = c.to_ascii_lowercase();
+        }
+        let volts_name = join("adc", core::str::from_utf8(&lower[..sfx.len()]).unwrap_or(""));
         let raw = self.check_target("adc", raw_name.as_str(), Family::Adc)?;
         let volts = self.check_target("adc", volts_name.as_str(), Family::Adc)?;
         let hz = rate as f32 / 1000.0;
@@ -898,7 +903,12 @@ impl<N: Real> Engine<N> {
     }
 
     fn cmd_log(&mut self, a: &mut Args<'_, '_>, hal: &mut impl Hal) -> Result<()> {
-        let (name, src) = if a.remaining() >= 4 {
+        // `log name var hz file` or `log var hz file`; three tokens whose second is not a rate but
+        // whose third is are the named form missing its file.
+        let rest = &a.toks[a.pos..];
+        let named = rest.len() >= 4
+            || (rest.len() == 3 && parse_rate(rest[1]).is_none() && parse_rate(rest[2]).is_some());
+        let (name, src) = if named {
             (join("", a.name("logname")?), a.name("varname")?)
         } else {
             let src = a.name("varname")?;
