@@ -37,7 +37,8 @@ pub const COMMANDS: &[CommandSpec] = &[
     c("adc", Main, "Configure the ADC Module", "adc channel frequency",
       "Format of the command is:\nadc channel frequency\n\n\
        channel(0-3,A,B): The channel to sample. Codes 0-3 indicate the numbered\n\
-       ADCs and A, B are the differential ADCs (T: temperature sensor, where present).\n\
+       ADCs and A, B are the differential ADCs.\n\
+       T is the temperature sensor, where the board has one.\n\
        frequency(1-100000): Desired sampling frequency\n\
        Creates ADCn (raw code) and adcn (volts: 0..vref single-ended, -vref/2..vref/2 differential).\n\
        Repeating the command changes the sampling frequency."),
