@@ -349,6 +349,13 @@ impl<N: Real> Engine<N> {
         self.value(id)
     }
 
+    /// Tells the engine the current time without running any update (never backwards). A
+    /// periodic variable defined afterwards first runs at this instant; ports call it before
+    /// [`Engine::execute`] so that new variables start when they are typed.
+    pub fn set_time(&mut self, now_us: u64) {
+        self.now_us = self.now_us.max(now_us);
+    }
+
     /// The earliest instant at which a periodic variable is due (`now_us` for one that has not
     /// run yet), or `None` if nothing is periodic. A simulated-time port jumps straight there.
     pub fn next_deadline(&self) -> Option<u64> {

@@ -156,6 +156,7 @@ impl Session {
             return self.sim(words.collect::<Vec<_>>().as_slice(), out);
         }
         self.poll();
+        self.engine.set_time(self.now_us());
         match self.engine.execute(line, &mut self.board, out)? {
             Outcome::Done => {}
             Outcome::Script(path) => self.script(path, out)?,
