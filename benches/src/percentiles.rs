@@ -50,7 +50,13 @@ impl Percentiles {
 
     /// Ratio of each percentile to a floor measured in the same run (`self / floor`).
     pub fn ratio_to(&self, floor: &Percentiles) -> Ratios {
-        let r = |a: u64, b: u64| if b == 0 { f64::NAN } else { a as f64 / b as f64 };
+        let r = |a: u64, b: u64| {
+            if b == 0 {
+                f64::NAN
+            } else {
+                a as f64 / b as f64
+            }
+        };
         Ratios {
             p50: r(self.p50, floor.p50),
             p99: r(self.p99, floor.p99),
@@ -104,7 +110,10 @@ mod tests {
     fn nearest_rank_on_known_set() {
         let mut v: Vec<u64> = (1..=1000).rev().collect();
         let p = Percentiles::from_samples(&mut v).unwrap();
-        assert_eq!((p.min, p.p50, p.p99, p.p999, p.max), (1, 500, 990, 999, 1000));
+        assert_eq!(
+            (p.min, p.p50, p.p99, p.p999, p.max),
+            (1, 500, 990, 999, 1000)
+        );
         assert!((p.mean - 500.5).abs() < 1e-9);
     }
 

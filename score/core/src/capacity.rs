@@ -25,6 +25,11 @@ pub const MAX_RATE_HZ: u32 = 100_000;
 /// Lowest update rate of a periodic symbol, in millihertz.
 pub const MIN_RATE_MILLIHZ: u32 = 1;
 
+// Slots are addressed by a `u8` (`VarId`), expression positions by a `u16`.
+const _: () =
+    assert!(MAX_SYMBOLS <= 255 && MAX_EXPR_OPS <= u16::MAX as usize && MAX_STREAMS <= 255);
+const _: () = assert!(MAX_NAME_LEN <= 255 && MAX_PATH_LEN <= 255);
+
 /// The capacities of this build, for reports (`capacities` command, firmware banner).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Capacities {

@@ -4,7 +4,9 @@
 
 use core::fmt::Write;
 
-use crate::capacity::{MAX_NAME_LEN, MAX_PATH_LEN, MAX_RATE_HZ, MAX_STREAMS, MAX_SYMBOLS, MIN_RATE_MILLIHZ};
+use crate::capacity::{
+    MAX_NAME_LEN, MAX_PATH_LEN, MAX_RATE_HZ, MAX_STREAMS, MAX_SYMBOLS, MIN_RATE_MILLIHZ,
+};
 use crate::engine::{Engine, Menu, Stream};
 use crate::error::{name as mk_name, tok, ChannelRange, Error, NameList, Result};
 use crate::expr::{self, Class, Op};
@@ -41,7 +43,8 @@ struct Args<'t, 'a> {
     pos: usize,
 }
 
-const NAME_EXPECTED: &str = "a variable name (a letter or _, then letters, digits or _; at most 15 characters)";
+const NAME_EXPECTED: &str =
+    "a variable name (a letter or _, then letters, digits or _; at most 15 characters)";
 const RATE_EXPECTED: &str = "a frequency in Hz between 0.001 and 100000";
 
 impl<'a> Args<'_, 'a> {
@@ -70,19 +73,31 @@ impl<'a> Args<'_, 'a> {
         if expr::is_name(t) {
             Ok(t)
         } else {
-            Err(Error::Invalid { command: self.cmd, token: tok(t), expected: NAME_EXPECTED })
+            Err(Error::Invalid {
+                command: self.cmd,
+                token: tok(t),
+                expected: NAME_EXPECTED,
+            })
         }
     }
 
     fn number<N: Real>(&mut self, expected: &'static str) -> Result<N> {
         let t = self.next(expected)?;
-        parse_number::<N>(t).ok_or(Error::Invalid { command: self.cmd, token: tok(t), expected })
+        parse_number::<N>(t).ok_or(Error::Invalid {
+            command: self.cmd,
+            token: tok(t),
+            expected,
+        })
     }
 
     /// A rate in millihertz.
     fn rate(&mut self, expected: &'static str) -> Result<u32> {
         let t = self.next(expected)?;
-        parse_rate(t).ok_or(Error::Invalid { command: self.cmd, token: tok(t), expected: RATE_EXPECTED })
+        parse_rate(t).ok_or(Error::Invalid {
+            command: self.cmd,
+            token: tok(t),
+            expected: RATE_EXPECTED,
+        })
     }
 
     fn operand<N: Real>(&mut self, expected: &'static str) -> Result<(Option<N>, &'a str)> {
@@ -92,14 +107,22 @@ impl<'a> Args<'_, 'a> {
         } else if expr::is_name(t) {
             Ok((None, t))
         } else {
-            Err(Error::Invalid { command: self.cmd, token: tok(t), expected: "a number or a variable name" })
+            Err(Error::Invalid {
+                command: self.cmd,
+                token: tok(t),
+                expected: "a number or a variable name",
+            })
         }
     }
 
     fn end(&self) -> Result<()> {
         match self.toks.get(self.pos) {
             None => Ok(()),
-            Some(t) => Err(Error::Extra { command: self.cmd, token: tok(t), usage: self.usage }),
+            Some(t) => Err(Error::Extra {
+                command: self.cmd,
+                token: tok(t),
+                usage: self.usage,
+            }),
         }
     }
 }
@@ -151,7 +174,9 @@ fn channel_suffix(buf: &mut ShortStr<4>, input: AdcInput) {
 fn pwm_suffix(out: PwmOutput) -> ShortStr<4> {
     match out {
         PwmOutput::Single(n) => channel_name_num(n),
-        PwmOutput::Complementary(k) => ShortStr::truncated(core::str::from_utf8(&[b'A' + k]).unwrap_or("?")),
+        PwmOutput::Complementary(k) => {
+            ShortStr::truncated(core::str::from_utf8(&[b'A' + k]).unwrap_or("?"))
+        }
     }
 }
 
@@ -186,14 +211,23 @@ fn parse_channel(t: &str, temperature_letter: bool) -> Option<(bool, u8, bool)> 
 }
 
 fn adc_input(cmd: &'static str, t: &str, hal: &impl Hal) -> Result<AdcInput> {
-    let range = ChannelRange::new(hal.adc_channels(), hal.adc_differential_pairs(), hal.adc_has_temperature());
+    let range = ChannelRange::new(
+        hal.adc_channels(),
+        hal.adc_differential_pairs(),
+        hal.adc_has_temperature(),
+    );
     let input = match parse_channel(t, true) {
         Some((_, _, true)) if range.temperature() => Some(AdcInput::Temperature),
         Some((false, n, false)) if n < range.singles() => Some(AdcInput::Single(n)),
         Some((true, k, false)) if k < range.pairs() => Some(AdcInput::Differential(k)),
         _ => None,
     };
-    input.ok_or(Error::Channel { command: cmd, token: tok(t), what: "an ADC channel", range })
+    input.ok_or(Error::Channel {
+        command: cmd,
+        token: tok(t),
+        what: "an ADC channel",
+        range,
+    })
 }
 
 fn pwm_output(cmd: &'static str, t: &str, hal: &impl Hal) -> Result<PwmOutput> {
@@ -204,13 +238,25 @@ fn pwm_output(cmd: &'static str, t: &str, hal: &impl Hal) -> Result<PwmOutput> {
         Some((true, k, _)) if k < n / 2 => Some(PwmOutput::Complementary(k)),
         _ => None,
     };
-    out.ok_or(Error::Channel { command: cmd, token: tok(t), what: "a PWM output", range })
+    out.ok_or(Error::Channel {
+        command: cmd,
+        token: tok(t),
+        what: "a PWM output",
+        range,
+    })
 }
 
 fn hal_err(command: &'static str, t: &str, error: HalError) -> Error {
     match error {
-        HalError::Unsupported => Error::Unsupported { command, what: "the hardware or file system is missing" },
-        error => Error::Hardware { command, token: tok(t), error },
+        HalError::Unsupported => Error::Unsupported {
+            command,
+            what: "the hardware or file system is missing",
+        },
+        error => Error::Hardware {
+            command,
+            token: tok(t),
+            error,
+        },
     }
 }
 
@@ -220,7 +266,11 @@ fn pwm_freq(args: &mut Args<'_, '_>) -> Result<f32> {
     let t = args.next("frequency")?;
     match parse_number::<f64>(t) {
         Some(f) if f > 0.0 && f <= 1e8 => Ok(f as f32),
-        _ => Err(Error::Invalid { command: args.cmd, token: tok(t), expected: PWM_FREQ }),
+        _ => Err(Error::Invalid {
+            command: args.cmd,
+            token: tok(t),
+            expected: PWM_FREQ,
+        }),
     }
 }
 
@@ -235,9 +285,16 @@ impl<N: Real> Engine<N> {
     ) -> Result<Outcome<'a>> {
         let tokens = Tokens::split(line)?;
         let toks = tokens.as_slice();
-        let Some((&word, rest)) = toks.split_first() else { return Ok(Outcome::Done) };
+        let Some((&word, rest)) = toks.split_first() else {
+            return Ok(Outcome::Done);
+        };
         let spec = help::spec(word).ok_or(Error::UnknownCommand { token: tok(word) })?;
-        let mut a = Args { cmd: spec.name, usage: spec.usage, toks: rest, pos: 0 };
+        let mut a = Args {
+            cmd: spec.name,
+            usage: spec.usage,
+            toks: rest,
+            pos: 0,
+        };
         // Writes to `out` are best effort: a full terminal must not undo a finished command.
         match spec.name {
             "help" => {
@@ -260,7 +317,11 @@ impl<N: Real> Engine<N> {
             }
             "var" | "main" => {
                 a.end()?;
-                self.menu = if spec.name == "var" { Menu::Var } else { Menu::Main };
+                self.menu = if spec.name == "var" {
+                    Menu::Var
+                } else {
+                    Menu::Main
+                };
                 let _ = writeln!(out);
                 let _ = help::write_menu(out, self.menu);
             }
@@ -284,13 +345,19 @@ impl<N: Real> Engine<N> {
             "printv" => {
                 let n = a.next("varname")?;
                 a.end()?;
-                let id = self.lookup(n).ok_or(Error::UnknownVariable { command: "printv", token: tok(n) })?;
+                let id = self.lookup(n).ok_or(Error::UnknownVariable {
+                    command: "printv",
+                    token: tok(n),
+                })?;
                 self.print_var(id, out);
             }
             "show" => {
                 let n = a.next("varname")?;
                 a.end()?;
-                let id = self.lookup(n).ok_or(Error::UnknownVariable { command: "show", token: tok(n) })?;
+                let id = self.lookup(n).ok_or(Error::UnknownVariable {
+                    command: "show",
+                    token: tok(n),
+                })?;
                 self.show(id, out);
             }
             "save" => {
@@ -306,16 +373,22 @@ impl<N: Real> Engine<N> {
             "load" | "script" => {
                 let p = a.next("filename")?;
                 a.end()?;
-                return Ok(if spec.name == "load" { Outcome::Load(p) } else { Outcome::Script(p) });
+                return Ok(if spec.name == "load" {
+                    Outcome::Load(p)
+                } else {
+                    Outcome::Script(p)
+                });
             }
             "run" => {
                 let t = a.next("seconds")?;
                 a.end()?;
-                let s = parse_number::<f64>(t).filter(|s| *s >= 0.0).ok_or(Error::Invalid {
-                    command: "run",
-                    token: tok(t),
-                    expected: "a duration in seconds (0 or more)",
-                })?;
+                let s = parse_number::<f64>(t)
+                    .filter(|s| *s >= 0.0)
+                    .ok_or(Error::Invalid {
+                        command: "run",
+                        token: tok(t),
+                        expected: "a duration in seconds (0 or more)",
+                    })?;
                 return Ok(Outcome::Run(s));
             }
             "clear" => {
@@ -335,7 +408,10 @@ impl<N: Real> Engine<N> {
                 let n = a.next("varname")?;
                 let t = a.next("value")?;
                 a.end()?;
-                let id = self.lookup(n).ok_or(Error::UnknownVariable { command: "set", token: tok(n) })?;
+                let id = self.lookup(n).ok_or(Error::UnknownVariable {
+                    command: "set",
+                    token: tok(n),
+                })?;
                 let v = parse_number::<N>(t).ok_or(Error::Invalid {
                     command: "set",
                     token: tok(t),
@@ -346,7 +422,10 @@ impl<N: Real> Engine<N> {
             "del" => {
                 let n = a.next("varname")?;
                 a.end()?;
-                let id = self.lookup(n).ok_or(Error::UnknownVariable { command: "del", token: tok(n) })?;
+                let id = self.lookup(n).ok_or(Error::UnknownVariable {
+                    command: "del",
+                    token: tok(n),
+                })?;
                 self.delete(id, hal)?;
             }
             "rate" => self.cmd_rate(&mut a, hal)?,
@@ -375,13 +454,24 @@ impl<N: Real> Engine<N> {
 
     /// Checks that `name` may be (re)defined by a command of `family`; returns its slot if it
     /// exists (a placeholder or a variable of the same family).
-    fn check_target(&self, command: &'static str, name: &str, family: Family) -> Result<Option<VarId>> {
-        let Some(id) = self.lookup(name) else { return Ok(None) };
+    fn check_target(
+        &self,
+        command: &'static str,
+        name: &str,
+        family: Family,
+    ) -> Result<Option<VarId>> {
+        let Some(id) = self.lookup(name) else {
+            return Ok(None);
+        };
         let kind = self.sym(id).map(|s| s.kind).unwrap_or(Kind::Placeholder);
         match kind.family() {
             Family::Placeholder => Ok(Some(id)),
             f if f == family => Ok(Some(id)),
-            _ => Err(Error::NameTaken { command, name: mk_name(name), what: kind.what() }),
+            _ => Err(Error::NameTaken {
+                command,
+                name: mk_name(name),
+                what: kind.what(),
+            }),
         }
     }
 
@@ -401,7 +491,11 @@ impl<N: Real> Engine<N> {
             }
         }
         if self.len() + needed > MAX_SYMBOLS {
-            return Err(Error::Full { command, what: "variables", capacity: MAX_SYMBOLS });
+            return Err(Error::Full {
+                command,
+                what: "variables",
+                capacity: MAX_SYMBOLS,
+            });
         }
         if lazy {
             for r in refs {
@@ -411,7 +505,11 @@ impl<N: Real> Engine<N> {
                         _ => false,
                     };
                 if cyc {
-                    return Err(Error::Cycle { command, name: mk_name(name), via: mk_name(r) });
+                    return Err(Error::Cycle {
+                        command,
+                        name: mk_name(name),
+                        via: mk_name(r),
+                    });
                 }
             }
         }
@@ -449,7 +547,9 @@ impl<N: Real> Engine<N> {
                 }
             }
         }
-        let old = self.syms[id.0 as usize].map(|s| s.kind).unwrap_or(Kind::Placeholder);
+        let old = self.syms[id.0 as usize]
+            .map(|s| s.kind)
+            .unwrap_or(Kind::Placeholder);
         if let Kind::Expr { start, len } = old {
             self.remove_ops(start as usize, len as usize);
         }
@@ -479,11 +579,20 @@ impl<N: Real> Engine<N> {
         self.lookup(name).unwrap_or(VarId(0))
     }
 
-    fn cmd_defexp(&mut self, a: &mut Args<'_, '_>, hal: &mut impl Hal, out: &mut impl Write) -> Result<()> {
+    fn cmd_defexp(
+        &mut self,
+        a: &mut Args<'_, '_>,
+        hal: &mut impl Hal,
+        out: &mut impl Write,
+    ) -> Result<()> {
         let name = a.name("varname")?;
         let toks = &a.toks[a.pos..];
         if toks.is_empty() {
-            return Err(Error::Missing { command: "defexp", expected: "a postfix expression", usage: a.usage });
+            return Err(Error::Missing {
+                command: "defexp",
+                expected: "a postfix expression",
+                usage: a.usage,
+            });
         }
         expr::validate::<N>("defexp", toks)?;
         let target = self.check_target("defexp", name, Family::Def)?;
@@ -529,7 +638,10 @@ impl<N: Real> Engine<N> {
                     e.ops[e.ops_used] = op;
                     e.ops_used += 1;
                 }
-                Kind::Expr { start: start as u16, len: toks.len() as u16 }
+                Kind::Expr {
+                    start: start as u16,
+                    len: toks.len() as u16,
+                }
             });
         }
         if let Some(id) = self.lookup(name) {
@@ -580,7 +692,11 @@ impl<N: Real> Engine<N> {
                     });
                 }
                 self.check_refs(cmd, name, target, &[src], true)?;
-                self.commit(name, &[src], None, N::ZERO, hal, |e, _| Kind::Sat { src: e.resolve(src), lo, hi });
+                self.commit(name, &[src], None, N::ZERO, hal, |e, _| Kind::Sat {
+                    src: e.resolve(src),
+                    lo,
+                    hi,
+                });
             }
             "defint" | "defdiff" => {
                 let rate = a.rate("refreshFreq")?;
@@ -590,9 +706,15 @@ impl<N: Real> Engine<N> {
                 self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| {
                     let src = e.resolve(src);
                     if int {
-                        Kind::Int { src, st: Trapezoid::default() }
+                        Kind::Int {
+                            src,
+                            st: Trapezoid::default(),
+                        }
                     } else {
-                        Kind::Diff { src, st: TwoPoint::default() }
+                        Kind::Diff {
+                            src,
+                            st: TwoPoint::default(),
+                        }
                     }
                 });
             }
@@ -617,8 +739,12 @@ impl<N: Real> Engine<N> {
                 let t = a.toks.get(a.pos).copied().unwrap_or("");
                 let fc: N = a.number("the cutoff frequency in Hz")?;
                 a.end()?;
-                if !(fc > N::ZERO) {
-                    return Err(Error::Invalid { command: cmd, token: tok(t), expected: "a cutoff frequency above 0 Hz" });
+                if fc <= N::ZERO {
+                    return Err(Error::Invalid {
+                        command: cmd,
+                        token: tok(t),
+                        expected: "a cutoff frequency above 0 Hz",
+                    });
                 }
                 self.check_refs(cmd, name, target, &[src], false)?;
                 self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| Kind::Lpf {
@@ -637,7 +763,11 @@ impl<N: Real> Engine<N> {
                     0 => None,
                     1 => {
                         a.pos += 1;
-                        return Err(Error::Missing { command: cmd, expected: "the upper output limit", usage: a.usage });
+                        return Err(Error::Missing {
+                            command: cmd,
+                            expected: "the upper output limit",
+                            usage: a.usage,
+                        });
                     }
                     _ => {
                         let lo: N = a.number("the lower output limit")?;
@@ -706,7 +836,12 @@ impl<N: Real> Engine<N> {
         }
     }
 
-    fn cmd_pwm(&mut self, a: &mut Args<'_, '_>, hal: &mut impl Hal, out: &mut impl Write) -> Result<()> {
+    fn cmd_pwm(
+        &mut self,
+        a: &mut Args<'_, '_>,
+        hal: &mut impl Hal,
+        out: &mut impl Write,
+    ) -> Result<()> {
         let t_ch = a.next("channel")?;
         let o = pwm_output("pwm", t_ch, hal)?;
         let freq = pwm_freq(a)?;
@@ -714,22 +849,39 @@ impl<N: Real> Engine<N> {
         a.end()?;
         let duty = parse_number::<N>(t_duty)
             .filter(|d| *d >= N::ZERO && *d <= N::from_u32(100))
-            .ok_or(Error::Invalid { command: "pwm", token: tok(t_duty), expected: "a duty cycle in percent (0-100)" })?;
+            .ok_or(Error::Invalid {
+                command: "pwm",
+                token: tok(t_duty),
+                expected: "a duty cycle in percent (0-100)",
+            })?;
         let name = join("PWM", pwm_suffix(o).as_str());
         let target = self.check_target("pwm", name.as_str(), Family::Pwm)?;
         if let Some(owner) = self.pwm_owner(o, target) {
-            return Err(Error::Busy { command: "pwm", token: tok(t_ch), owner: mk_name(self.name_of(owner)) });
+            return Err(Error::Busy {
+                command: "pwm",
+                token: tok(t_ch),
+                owner: mk_name(self.name_of(owner)),
+            });
         }
         self.check_refs("pwm", name.as_str(), target, &[], false)?;
-        let actual = hal.pwm_configure(o, freq).map_err(|e| hal_err("pwm", t_ch, e))?;
+        let actual = hal
+            .pwm_configure(o, freq)
+            .map_err(|e| hal_err("pwm", t_ch, e))?;
         let applied = hal.pwm_set_duty(o, (duty.to_f64() / 100.0) as f32);
         Self::note_frequency(out, name.as_str(), freq, actual);
         let value = N::from_f64(applied as f64 * 100.0);
-        self.commit(name.as_str(), &[], None, value, hal, |_, _| Kind::PwmFixed { out: o, freq });
+        self.commit(name.as_str(), &[], None, value, hal, |_, _| {
+            Kind::PwmFixed { out: o, freq }
+        });
         Ok(())
     }
 
-    fn cmd_defpwm(&mut self, a: &mut Args<'_, '_>, hal: &mut impl Hal, out: &mut impl Write) -> Result<()> {
+    fn cmd_defpwm(
+        &mut self,
+        a: &mut Args<'_, '_>,
+        hal: &mut impl Hal,
+        out: &mut impl Write,
+    ) -> Result<()> {
         let name = a.name("varname")?;
         let src = a.name("basename")?;
         let rate = a.rate("refreshFreq")?;
@@ -739,12 +891,24 @@ impl<N: Real> Engine<N> {
         a.end()?;
         let target = self.check_target("defpwm", name, Family::Def)?;
         if let Some(owner) = self.pwm_owner(o, target) {
-            return Err(Error::Busy { command: "defpwm", token: tok(t_ch), owner: mk_name(self.name_of(owner)) });
+            return Err(Error::Busy {
+                command: "defpwm",
+                token: tok(t_ch),
+                owner: mk_name(self.name_of(owner)),
+            });
         }
         self.check_refs("defpwm", name, target, &[src], false)?;
-        let actual = hal.pwm_configure(o, freq).map_err(|e| hal_err("defpwm", t_ch, e))?;
+        let actual = hal
+            .pwm_configure(o, freq)
+            .map_err(|e| hal_err("defpwm", t_ch, e))?;
         Self::note_frequency(out, name, freq, actual);
-        self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| Kind::PwmFollow { src: e.resolve(src), out: o, freq });
+        self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| {
+            Kind::PwmFollow {
+                src: e.resolve(src),
+                out: o,
+                freq,
+            }
+        });
         Ok(())
     }
 
@@ -752,7 +916,11 @@ impl<N: Real> Engine<N> {
         let t = a.next("pin")?;
         match t.parse::<u8>() {
             Ok(p) if p < hal.gpio_pins() => Ok((p, "")),
-            _ => Err(Error::Invalid { command: a.cmd, token: tok(t), expected: "a GPIO pin number of this board" }),
+            _ => Err(Error::Invalid {
+                command: a.cmd,
+                token: tok(t),
+                expected: "a GPIO pin number of this board",
+            }),
         }
     }
 
@@ -764,12 +932,19 @@ impl<N: Real> Engine<N> {
         let name = join("GPIO", channel_name_num(pin).as_str());
         let target = self.check_target("gpio", name.as_str(), Family::Gpio)?;
         if let Some(owner) = self.pin_owner(pin, target) {
-            return Err(Error::Busy { command: "gpio", token: tok(t_pin), owner: mk_name(self.name_of(owner)) });
+            return Err(Error::Busy {
+                command: "gpio",
+                token: tok(t_pin),
+                owner: mk_name(self.name_of(owner)),
+            });
         }
         self.check_refs("gpio", name.as_str(), target, &[], false)?;
-        hal.gpio_configure(pin, false).map_err(|e| hal_err("gpio", t_pin, e))?;
+        hal.gpio_configure(pin, false)
+            .map_err(|e| hal_err("gpio", t_pin, e))?;
         let v = if hal.gpio_read(pin) { N::ONE } else { N::ZERO };
-        self.commit(name.as_str(), &[], Some(rate), v, hal, |_, _| Kind::GpioIn { pin });
+        self.commit(name.as_str(), &[], Some(rate), v, hal, |_, _| {
+            Kind::GpioIn { pin }
+        });
         Ok(())
     }
 
@@ -782,11 +957,21 @@ impl<N: Real> Engine<N> {
         a.end()?;
         let target = self.check_target("defgpio", name, Family::Def)?;
         if let Some(owner) = self.pin_owner(pin, target) {
-            return Err(Error::Busy { command: "defgpio", token: tok(t_pin), owner: mk_name(self.name_of(owner)) });
+            return Err(Error::Busy {
+                command: "defgpio",
+                token: tok(t_pin),
+                owner: mk_name(self.name_of(owner)),
+            });
         }
         self.check_refs("defgpio", name, target, &[src], false)?;
-        hal.gpio_configure(pin, true).map_err(|e| hal_err("defgpio", t_pin, e))?;
-        self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| Kind::GpioOut { src: e.resolve(src), pin });
+        hal.gpio_configure(pin, true)
+            .map_err(|e| hal_err("defgpio", t_pin, e))?;
+        self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| {
+            Kind::GpioOut {
+                src: e.resolve(src),
+                pin,
+            }
+        });
         Ok(())
     }
 
@@ -803,13 +988,17 @@ impl<N: Real> Engine<N> {
         for (d, c) in lower.iter_mut().zip(sfx) {
             *d = c.to_ascii_lowercase();
         }
-        let volts_name = join("adc", core::str::from_utf8(&lower[..sfx.len()]).unwrap_or(""));
+        let volts_name = join(
+            "adc",
+            core::str::from_utf8(&lower[..sfx.len()]).unwrap_or(""),
+        );
         let raw = self.check_target("adc", raw_name.as_str(), Family::Adc)?;
         let volts = self.check_target("adc", volts_name.as_str(), Family::Adc)?;
         let hz = rate as f32 / 1000.0;
         // Existing channel: a new sampling rate.
         if let Some(Kind::AdcRaw { .. }) = raw.and_then(|r| self.sym(r)).map(|s| s.kind) {
-            hal.adc_configure(input, hz).map_err(|e| hal_err("adc", t_ch, e))?;
+            hal.adc_configure(input, hz)
+                .map_err(|e| hal_err("adc", t_ch, e))?;
             if let Some(s) = raw.and_then(|r| self.syms[r.0 as usize].as_mut()) {
                 s.task = Some(Task::new(rate));
             }
@@ -818,9 +1007,14 @@ impl<N: Real> Engine<N> {
         }
         let needed = raw.is_none() as usize + volts.is_none() as usize;
         if self.len() + needed > MAX_SYMBOLS {
-            return Err(Error::Full { command: "adc", what: "variables", capacity: MAX_SYMBOLS });
+            return Err(Error::Full {
+                command: "adc",
+                what: "variables",
+                capacity: MAX_SYMBOLS,
+            });
         }
-        hal.adc_configure(input, hz).map_err(|e| hal_err("adc", t_ch, e))?;
+        hal.adc_configure(input, hz)
+            .map_err(|e| hal_err("adc", t_ch, e))?;
         let code = hal.adc_read(input).unwrap_or(0);
         let v = self.volts(input, code, hal);
         let slot = |e: &mut Self, n: &str| match e.lookup(n) {
@@ -839,7 +1033,12 @@ impl<N: Real> Engine<N> {
             value: N::from_u32(code as u32),
             task: Some(Task::new(rate)),
         });
-        self.syms[vid.0 as usize] = Some(Symbol { name: volts_name, kind: Kind::AdcVolts { raw: rid }, value: v, task: None });
+        self.syms[vid.0 as usize] = Some(Symbol {
+            name: volts_name,
+            kind: Kind::AdcVolts { raw: rid },
+            value: v,
+            task: None,
+        });
         self.rebuild();
         Ok(())
     }
@@ -848,20 +1047,28 @@ impl<N: Real> Engine<N> {
         let n = a.next("varname")?;
         let rate = a.rate("frequency")?;
         a.end()?;
-        let mut id = self.lookup(n).ok_or(Error::UnknownVariable { command: "rate", token: tok(n) })?;
+        let mut id = self.lookup(n).ok_or(Error::UnknownVariable {
+            command: "rate",
+            token: tok(n),
+        })?;
         if let Some(Kind::AdcVolts { raw }) = self.sym(id).map(|s| s.kind) {
             id = raw;
         }
-        let sym = self.sym(id).copied().ok_or(Error::UnknownVariable { command: "rate", token: tok(n) })?;
+        let sym = self.sym(id).copied().ok_or(Error::UnknownVariable {
+            command: "rate",
+            token: tok(n),
+        })?;
         let Some(mut task) = sym.task else {
             return Err(Error::Invalid {
                 command: "rate",
                 token: tok(n),
-                expected: "a periodic variable (bare expressions, constants and pwm duties have no rate)",
+                expected:
+                    "a periodic variable (bare expressions, constants and pwm duties have no rate)",
             });
         };
         if let Kind::AdcRaw { input, .. } = sym.kind {
-            hal.adc_configure(input, rate as f32 / 1000.0).map_err(|e| hal_err("rate", n, e))?;
+            hal.adc_configure(input, rate as f32 / 1000.0)
+                .map_err(|e| hal_err("rate", n, e))?;
         }
         task.mhz = rate;
         task.frac = 0;
@@ -874,12 +1081,20 @@ impl<N: Real> Engine<N> {
 
     fn check_path(&self, cmd: &'static str, path: &str) -> Result<usize> {
         if path.len() > MAX_PATH_LEN {
-            return Err(Error::Invalid { command: cmd, token: tok(path), expected: "a file name of at most 63 bytes" });
+            return Err(Error::Invalid {
+                command: cmd,
+                token: tok(path),
+                expected: "a file name of at most 63 bytes",
+            });
         }
         self.streams
             .iter()
             .position(|s| s.is_none())
-            .ok_or(Error::Full { command: cmd, what: "open files", capacity: MAX_STREAMS })
+            .ok_or(Error::Full {
+                command: cmd,
+                what: "open files",
+                capacity: MAX_STREAMS,
+            })
     }
 
     fn cmd_infile(&mut self, a: &mut Args<'_, '_>, hal: &mut impl Hal) -> Result<()> {
@@ -890,15 +1105,28 @@ impl<N: Real> Engine<N> {
         let target = self.check_target("infile", name, Family::Infile)?;
         self.check_refs("infile", name, target, &[], false)?;
         let slot = self.check_path("infile", path)?;
-        let id = hal.open_input(path).map_err(|e| hal_err("infile", path, e))?;
+        let id = hal
+            .open_input(path)
+            .map_err(|e| hal_err("infile", path, e))?;
         let len = hal.input_len(id);
         if len == 0 {
             hal.close(id);
-            return Err(Error::Invalid { command: "infile", token: tok(path), expected: "a file with at least one number" });
+            return Err(Error::Invalid {
+                command: "infile",
+                token: tok(path),
+                expected: "a file with at least one number",
+            });
         }
         let first = N::from_f64(hal.input_sample(id, 0));
-        self.streams[slot] = Some(Stream { id, path: ShortStr::truncated(path) });
-        self.commit(name, &[], Some(rate), first, hal, |_, _| Kind::Infile { stream: slot as u8, len, cursor: 0 });
+        self.streams[slot] = Some(Stream {
+            id,
+            path: ShortStr::truncated(path),
+        });
+        self.commit(name, &[], Some(rate), first, hal, |_, _| Kind::Infile {
+            stream: slot as u8,
+            len,
+            cursor: 0,
+        });
         Ok(())
     }
 
@@ -929,8 +1157,14 @@ impl<N: Real> Engine<N> {
         self.check_refs("log", name, target, &[src], false)?;
         let slot = self.check_path("log", path)?;
         let id = hal.open_log(path).map_err(|e| hal_err("log", path, e))?;
-        self.streams[slot] = Some(Stream { id, path: ShortStr::truncated(path) });
-        self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| Kind::Log { src: e.resolve(src), stream: slot as u8 });
+        self.streams[slot] = Some(Stream {
+            id,
+            path: ShortStr::truncated(path),
+        });
+        self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| Kind::Log {
+            src: e.resolve(src),
+            stream: slot as u8,
+        });
         Ok(())
     }
 
@@ -940,9 +1174,16 @@ impl<N: Real> Engine<N> {
     /// value of an integral (`defint`/`defwind`). Others are refused with
     /// [`Error::NotWritable`]; the table is unchanged on error.
     pub fn set(&mut self, id: VarId, value: N, hal: &mut impl Hal) -> Result<()> {
-        let sym = *self.sym(id).ok_or(Error::UnknownVariable { command: "set", token: tok("?") })?;
+        let sym = *self.sym(id).ok_or(Error::UnknownVariable {
+            command: "set",
+            token: tok("?"),
+        })?;
         if !value.is_finite() {
-            return Err(Error::Invalid { command: "set", token: tok("value"), expected: "a finite number" });
+            return Err(Error::Invalid {
+                command: "set",
+                token: tok("value"),
+                expected: "a finite number",
+            });
         }
         let mut kind = sym.kind;
         let stored = match &mut kind {
@@ -965,7 +1206,12 @@ impl<N: Real> Engine<N> {
                 st.acc = value;
                 value
             }
-            k => return Err(Error::NotWritable { name: sym.name, what: k.what() }),
+            k => {
+                return Err(Error::NotWritable {
+                    name: sym.name,
+                    what: k.what(),
+                })
+            }
         };
         if let Some(s) = &mut self.syms[id.0 as usize] {
             s.kind = kind;
@@ -977,7 +1223,10 @@ impl<N: Real> Engine<N> {
     /// Deletes a variable (both of an ADC pair), releasing its hardware or file. Refused with
     /// [`Error::InUse`] while other variables read it.
     pub fn delete(&mut self, id: VarId, hal: &mut impl Hal) -> Result<()> {
-        let sym = *self.sym(id).ok_or(Error::UnknownVariable { command: "del", token: tok("?") })?;
+        let sym = *self.sym(id).ok_or(Error::UnknownVariable {
+            command: "del",
+            token: tok("?"),
+        })?;
         let partner = match sym.kind {
             Kind::AdcRaw { volts, .. } => Some(volts),
             Kind::AdcVolts { raw } => Some(raw),
@@ -992,7 +1241,10 @@ impl<N: Real> Engine<N> {
             });
         }
         if users.total() > 0 {
-            return Err(Error::InUse { name: sym.name, users });
+            return Err(Error::InUse {
+                name: sym.name,
+                users,
+            });
         }
         for who in [Some(id), partner].into_iter().flatten() {
             self.remove(who, hal);
@@ -1011,7 +1263,9 @@ impl<N: Real> Engine<N> {
     }
 
     fn remove(&mut self, id: VarId, hal: &mut impl Hal) {
-        let Some(sym) = self.syms[id.0 as usize] else { return };
+        let Some(sym) = self.syms[id.0 as usize] else {
+            return;
+        };
         if let Kind::Expr { start, len } = sym.kind {
             self.remove_ops(start as usize, len as usize);
         }
@@ -1050,7 +1304,9 @@ impl<N: Real> Engine<N> {
     /// Removes placeholders nothing refers to any more.
     fn collect_placeholders(&mut self) {
         for i in 0..MAX_SYMBOLS {
-            if matches!(self.syms[i].map(|s| s.kind), Some(Kind::Placeholder)) && !self.has_users(VarId(i as u8)) {
+            if matches!(self.syms[i].map(|s| s.kind), Some(Kind::Placeholder))
+                && !self.has_users(VarId(i as u8))
+            {
                 self.syms[i] = None;
             }
         }
@@ -1058,5 +1314,10 @@ impl<N: Real> Engine<N> {
 }
 
 fn placeholder<N: Real>(name: &str) -> Symbol<N> {
-    Symbol { name: mk_name(name), kind: Kind::Placeholder, value: N::ZERO, task: None }
+    Symbol {
+        name: mk_name(name),
+        kind: Kind::Placeholder,
+        value: N::ZERO,
+        task: None,
+    }
 }

@@ -65,15 +65,16 @@ impl<N: Real> Default for Engine<N> {
 }
 
 impl<N: Real> Engine<N> {
-    /// An empty table at time 0.
-    pub fn new() -> Self {
+    /// An empty table at time 0. `const`, so a firmware can place the engine (16-23 KB, see
+    /// the `capacities` command) in a `static` instead of building it on the stack.
+    pub const fn new() -> Self {
         Engine {
             syms: [None; MAX_SYMBOLS],
-            ops: [Op::default(); MAX_EXPR_OPS],
+            ops: [Op::Bin(crate::expr::BinOp::Add); MAX_EXPR_OPS],
             ops_used: 0,
             streams: [None; MAX_STREAMS],
-            view: [SymSet::default(); MAX_SYMBOLS],
-            needs: [SymSet::default(); MAX_SYMBOLS],
+            view: [SymSet::EMPTY; MAX_SYMBOLS],
+            needs: [SymSet::EMPTY; MAX_SYMBOLS],
             eval_order: [0; MAX_SYMBOLS],
             eval_len: 0,
             run_order: [0; MAX_SYMBOLS],
@@ -207,7 +208,9 @@ impl<N: Real> Engine<N> {
                     let mut needs = SymSet::default();
                     let view = &self.view;
                     if let Some(s) = &self.syms[i] {
-                        s.kind.for_each_ref(&self.ops[..ops_used], |r| needs.union(&view[r.0 as usize]));
+                        s.kind.for_each_ref(&self.ops[..ops_used], |r| {
+                            needs.union(&view[r.0 as usize])
+                        });
                     }
                     self.needs[i] = needs;
                     self.view[i] = needs;
@@ -224,7 +227,8 @@ impl<N: Real> Engine<N> {
                 let mut needs = SymSet::default();
                 let view = &self.view;
                 if let Some(s) = &self.syms[i] {
-                    s.kind.for_each_ref(&self.ops[..ops_used], |r| needs.union(&view[r.0 as usize]));
+                    s.kind
+                        .for_each_ref(&self.ops[..ops_used], |r| needs.union(&view[r.0 as usize]));
                 }
                 self.needs[i] = needs;
             }
@@ -256,14 +260,19 @@ impl<N: Real> Engine<N> {
                 }
                 let ready = (0..MAX_SYMBOLS).all(|j| {
                     let p = self.producer(j);
-                    !self.needs[i].contains(j) || p == i || !is_task(&self.syms[p]) || placed.contains(p)
+                    !self.needs[i].contains(j)
+                        || p == i
+                        || !is_task(&self.syms[p])
+                        || placed.contains(p)
                 });
                 if ready {
                     pick = Some(i);
                     break;
                 }
             }
-            let i = pick.or_else(|| (0..MAX_SYMBOLS).find(|&i| is_task(&self.syms[i]) && !placed.contains(i)));
+            let i = pick.or_else(|| {
+                (0..MAX_SYMBOLS).find(|&i| is_task(&self.syms[i]) && !placed.contains(i))
+            });
             let Some(i) = i else { break };
             placed.insert(i);
             rank[i] = r as u8;
@@ -276,7 +285,10 @@ impl<N: Real> Engine<N> {
             }
         }
         let key = |e: &Self, i: u8| {
-            let mhz = e.syms[i as usize].as_ref().and_then(|s| s.task).map_or(0, |t| t.mhz);
+            let mhz = e.syms[i as usize]
+                .as_ref()
+                .and_then(|s| s.task)
+                .map_or(0, |t| t.mhz);
             (u32::MAX - mhz, rank[i as usize])
         };
         for a in 1..self.run_len {
@@ -317,7 +329,9 @@ impl<N: Real> Engine<N> {
     }
 
     fn compute_lazy(&self, j: usize) -> N {
-        let Some(s) = &self.syms[j] else { return N::ZERO };
+        let Some(s) = &self.syms[j] else {
+            return N::ZERO;
+        };
         match s.kind {
             Kind::Expr { start, len } => {
                 let (s, l) = (start as usize, len as usize);
@@ -380,14 +394,18 @@ impl<N: Real> Engine<N> {
         let mut ran = 0;
         for k in 0..self.run_len {
             let i = self.run_order[k] as usize;
-            let Some(mut task) = self.syms[i].as_ref().and_then(|s| s.task) else { continue };
+            let Some(mut task) = self.syms[i].as_ref().and_then(|s| s.task) else {
+                continue;
+            };
             let t = match task.due {
                 None => now,
                 Some(due) if due > now => continue,
                 Some(due) => {
                     let behind = task.periods_behind(due, now);
                     if behind > 0 {
-                        task.missed = task.missed.saturating_add(behind.min(u32::MAX as u64) as u32);
+                        task.missed = task
+                            .missed
+                            .saturating_add(behind.min(u32::MAX as u64) as u32);
                         task.advance(due, behind);
                     }
                     task.due.unwrap_or(now)
@@ -420,12 +438,22 @@ impl<N: Real> Engine<N> {
                 Err(_) => sym.value,
             },
             Kind::Int { src, st } => st.step(t, self.stored(*src)),
-            Kind::Wind { src, gain, pre, post, st } => {
+            Kind::Wind {
+                src,
+                gain,
+                pre,
+                post,
+                st,
+            } => {
                 let x = self.stored(*src) + *gain * (self.stored(*post) - self.stored(*pre));
                 st.step(t, x)
             }
             Kind::Diff { src, st } => st.step(t, self.stored(*src)),
-            Kind::Lpf { src, cutoff_hz, last_t } => {
+            Kind::Lpf {
+                src,
+                cutoff_hz,
+                last_t,
+            } => {
                 let x = self.stored(*src);
                 let y = match *last_t {
                     Some(t0) if t > t0 => {
@@ -439,7 +467,15 @@ impl<N: Real> Engine<N> {
                 *last_t = Some(t);
                 y
             }
-            Kind::Pid { src, kp, ki, kd, limits, int, der } => {
+            Kind::Pid {
+                src,
+                kp,
+                ki,
+                kd,
+                limits,
+                int,
+                der,
+            } => {
                 let e = self.stored(*src);
                 let (kp, ki, kd) = (self.operand(*kp), self.operand(*ki), self.operand(*kd));
                 let before = int.acc;
@@ -462,7 +498,11 @@ impl<N: Real> Engine<N> {
             }
             Kind::PwmFollow { src, out, .. } => {
                 let x = self.stored(*src) / N::from_u32(100);
-                let duty = if x.is_finite() { clamp(x, N::ZERO, N::ONE) } else { N::ZERO };
+                let duty = if x.is_finite() {
+                    clamp(x, N::ZERO, N::ONE)
+                } else {
+                    N::ZERO
+                };
                 let applied = hal.pwm_set_duty(*out, duty.to_f64() as f32);
                 N::from_f64(applied as f64) * N::from_u32(100)
             }
@@ -472,7 +512,11 @@ impl<N: Real> Engine<N> {
                 hal.gpio_write(*pin, high);
                 bool_num(high)
             }
-            Kind::Infile { stream, len, cursor } => match self.stream_id(*stream) {
+            Kind::Infile {
+                stream,
+                len,
+                cursor,
+            } => match self.stream_id(*stream) {
                 Some(id) if *len > 0 => {
                     let v = N::from_f64(hal.input_sample(id, *cursor));
                     *cursor = (*cursor + 1) % *len;
@@ -500,7 +544,10 @@ impl<N: Real> Engine<N> {
     }
 
     pub(crate) fn stream_id(&self, slot: u8) -> Option<StreamId> {
-        self.streams.get(slot as usize).and_then(|s| s.as_ref()).map(|s| s.id)
+        self.streams
+            .get(slot as usize)
+            .and_then(|s| s.as_ref())
+            .map(|s| s.id)
     }
 
     /// Volts of a raw code (thesis: `[0, vref]` single-ended, `[-vref/2, vref/2]` differential).

@@ -12,16 +12,16 @@ pub type Token = ShortStr<24>;
 /// A symbol name.
 pub type Name = ShortStr<MAX_NAME_LEN>;
 
-/// Up to eight names, plus how many more there were (for "used by ..." messages).
+/// Up to four names, plus how many more there were (for "used by ..." messages).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct NameList {
-    names: [Name; 8],
+    names: [Name; 4],
     shown: u8,
     total: u16,
 }
 
 impl NameList {
-    /// Adds a name (only the first eight are kept; all are counted).
+    /// Adds a name (only the first four are kept; all are counted).
     pub fn push(&mut self, name: &str) {
         if (self.shown as usize) < self.names.len() {
             self.names[self.shown as usize] = Name::truncated(name);
@@ -156,7 +156,9 @@ pub enum Error {
         owner: Name,
     },
     /// `set` on a variable that is computed, not stored.
-    #[error("set: '{name}' is {what} and cannot be set (constants, pwm duties and integrators can)")]
+    #[error(
+        "set: '{name}' is {what} and cannot be set (constants, pwm duties and integrators can)"
+    )]
     NotWritable {
         /// The variable.
         name: Name,
@@ -227,7 +229,11 @@ pub struct ChannelRange {
 impl ChannelRange {
     /// `singles` numbered channels, `pairs` lettered pairs, and maybe a temperature sensor.
     pub fn new(singles: u8, pairs: u8, temperature: bool) -> Self {
-        Self { singles, pairs: pairs.min(26), temperature }
+        Self {
+            singles,
+            pairs: pairs.min(26),
+            temperature,
+        }
     }
     /// Numbered channels.
     pub fn singles(&self) -> u8 {

@@ -107,12 +107,18 @@ pub(crate) fn validate<N: Real>(command: &'static str, tokens: &[&str]) -> Resul
     for t in tokens {
         match classify::<N>(t) {
             None => {
-                let problem = if t.len() > MAX_NAME_LEN && t.starts_with(|c: char| c.is_ascii_alphabetic()) {
+                let problem = if t.len() > MAX_NAME_LEN
+                    && t.starts_with(|c: char| c.is_ascii_alphabetic())
+                {
                     "names are at most 15 characters"
                 } else {
                     "expected a number, a variable name or an operator (+ - * / min max neg abs sqrt sin cos exp)"
                 };
-                return Err(Error::Expression { command, token: tok(t), problem });
+                return Err(Error::Expression {
+                    command,
+                    token: tok(t),
+                    problem,
+                });
             }
             Some(Class::Lit(_)) | Some(Class::Name(_)) => depth += 1,
             Some(Class::Un(_)) => {
@@ -222,7 +228,7 @@ pub(crate) fn eval<N: Real>(ops: &[Op<N>], var: impl Fn(VarId) -> N) -> N {
 }
 
 fn nan<N: Real>() -> N {
-    N::ZERO / N::ZERO
+    N::NAN
 }
 
 /// Writes the token text of an op (for `save` and the tree echo).
@@ -259,7 +265,12 @@ mod tests {
         assert!(validate::<f64>("defexp", &["a", "+"]).is_err());
         assert!(validate::<f64>("defexp", &["a", "b"]).is_err());
         assert!(validate::<f64>("defexp", &["a", "$"]).is_err());
-        let ops = [Op::Var(VarId(0)), Op::Lit(1.0), Op::Bin(BinOp::Sub), Op::Un(UnOp::Abs)];
+        let ops = [
+            Op::Var(VarId(0)),
+            Op::Lit(1.0),
+            Op::Bin(BinOp::Sub),
+            Op::Un(UnOp::Abs),
+        ];
         assert_eq!(eval(&ops, |_| 0.25f64), 0.75);
         let ops = [Op::Lit(3.0f64), Op::Lit(2.0), Op::Bin(BinOp::Min)];
         assert_eq!(eval(&ops, |_| 0.0), 2.0);
@@ -269,6 +280,8 @@ mod tests {
     #[test]
     fn names() {
         assert!(is_name("Kp") && is_name("_x1") && is_name("ADC0"));
-        assert!(!is_name("1a") && !is_name("neg") && !is_name("a-b") && !is_name("abcdefghijklmnop"));
+        assert!(
+            !is_name("1a") && !is_name("neg") && !is_name("a-b") && !is_name("abcdefghijklmnop")
+        );
     }
 }

@@ -26,7 +26,13 @@ const fn c(
     usage: &'static str,
     detail: &'static str,
 ) -> CommandSpec {
-    CommandSpec { name, menu, summary, usage, detail }
+    CommandSpec {
+        name,
+        menu,
+        summary,
+        usage,
+        detail,
+    }
 }
 
 use Menu::{Main, Var};
@@ -119,7 +125,10 @@ pub fn spec(name: &str) -> Option<&'static CommandSpec> {
 /// Prints the listing of `menu` (thesis Fig. 5.1).
 pub(crate) fn write_menu(out: &mut dyn Write, menu: Menu) -> fmt::Result {
     writeln!(out, "Available commands")?;
-    writeln!(out, "(Type 'help cmdname' for more information on a command)")?;
+    writeln!(
+        out,
+        "(Type 'help cmdname' for more information on a command)"
+    )?;
     writeln!(out, "------------------")?;
     // The thesis lists these four first in the variables menu.
     let first: &[&str] = match menu {
@@ -131,7 +140,10 @@ pub(crate) fn write_menu(out: &mut dyn Write, menu: Menu) -> fmt::Result {
             writeln!(out, "{} : {}", c.name, c.summary)?;
         }
     }
-    for c in COMMANDS.iter().filter(|c| c.menu == menu && !first.contains(&c.name)) {
+    for c in COMMANDS
+        .iter()
+        .filter(|c| c.menu == menu && !first.contains(&c.name))
+    {
         writeln!(out, "{} : {}", c.name, c.summary)?;
     }
     Ok(())

@@ -16,7 +16,10 @@ pub(crate) struct Tokens<'a> {
 
 impl<'a> Tokens<'a> {
     pub(crate) fn split(line: &'a str) -> Result<Self> {
-        let mut t = Tokens { items: [""; MAX_TOKENS], len: 0 };
+        let mut t = Tokens {
+            items: [""; MAX_TOKENS],
+            len: 0,
+        };
         for (i, word) in line.split_whitespace().enumerate() {
             if word.starts_with('#') || word.starts_with('(') {
                 break;

@@ -35,7 +35,12 @@ impl Default for LineBuffer {
 impl LineBuffer {
     /// An empty buffer.
     pub const fn new() -> Self {
-        Self { buf: [0; MAX_LINE], len: 0, ready: false, last_cr: false }
+        Self {
+            buf: [0; MAX_LINE],
+            len: 0,
+            ready: false,
+            last_cr: false,
+        }
     }
 
     /// Feeds one received byte.

@@ -26,6 +26,8 @@ pub trait Real:
     const ZERO: Self;
     /// 1.
     const ONE: Self;
+    /// Not a number.
+    const NAN: Self;
     /// Machine epsilon (distance from 1 to the next representable value).
     const EPSILON: Self;
     /// Name of the type, for reports.
@@ -59,6 +61,7 @@ macro_rules! impl_real {
         impl Real for $t {
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
+            const NAN: Self = <$t>::NAN;
             const EPSILON: Self = <$t>::EPSILON;
             const NAME: &'static str = $name;
             #[inline]
@@ -113,8 +116,24 @@ macro_rules! impl_real {
     };
 }
 
-impl_real!(f32, "f32", libm::sqrtf, libm::sinf, libm::cosf, libm::expf, libm::fabsf);
-impl_real!(f64, "f64", libm::sqrt, libm::sin, libm::cos, libm::exp, libm::fabs);
+impl_real!(
+    f32,
+    "f32",
+    libm::sqrtf,
+    libm::sinf,
+    libm::cosf,
+    libm::expf,
+    libm::fabsf
+);
+impl_real!(
+    f64,
+    "f64",
+    libm::sqrt,
+    libm::sin,
+    libm::cos,
+    libm::exp,
+    libm::fabs
+);
 
 /// The number type selected for this build: `f64` by default, `f32` with the `f32` feature.
 #[cfg(not(feature = "f32"))]
@@ -129,7 +148,9 @@ mod tests {
 
     #[test]
     fn parse_refuses_non_finite_and_words() {
-        for bad in ["inf", "-inf", "NaN", "infinity", "", "-", "1e999", "abc", "1.2.3"] {
+        for bad in [
+            "inf", "-inf", "NaN", "infinity", "", "-", "1e999", "abc", "1.2.3",
+        ] {
             assert_eq!(f64::parse_finite(bad), None, "{bad}");
         }
         assert_eq!(f64::parse_finite("-.5"), Some(-0.5));

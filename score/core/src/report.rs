@@ -142,8 +142,14 @@ impl<N: Real> Engine<N> {
 
     /// Writes the command line that recreates variable `id` (none for placeholders and the
     /// volts half of an ADC pair). Returns whether a line was written.
-    pub(crate) fn write_definition(&self, id: VarId, out: &mut dyn Write) -> Result<bool, fmt::Error> {
-        let Some(sym) = self.sym(id) else { return Ok(false) };
+    pub(crate) fn write_definition(
+        &self,
+        id: VarId,
+        out: &mut dyn Write,
+    ) -> Result<bool, fmt::Error> {
+        let Some(sym) = self.sym(id) else {
+            return Ok(false);
+        };
         let name = sym.name.as_str();
         let rate = Hz(sym.task.map_or(0, |t| t.mhz));
         match sym.kind {
@@ -163,20 +169,37 @@ impl<N: Real> Engine<N> {
             Kind::Scale { src, a, b, c, d } => {
                 write!(out, "defscale {name} {} {a} {b} {c} {d}", self.name_of(src))?
             }
-            Kind::Sat { src, lo, hi } => write!(out, "defsat {name} {} {lo} {hi}", self.name_of(src))?,
+            Kind::Sat { src, lo, hi } => {
+                write!(out, "defsat {name} {} {lo} {hi}", self.name_of(src))?
+            }
             Kind::Int { src, .. } => write!(out, "defint {name} {} {rate}", self.name_of(src))?,
             Kind::Diff { src, .. } => write!(out, "defdiff {name} {} {rate}", self.name_of(src))?,
-            Kind::Wind { src, gain, pre, post, .. } => write!(
+            Kind::Wind {
+                src,
+                gain,
+                pre,
+                post,
+                ..
+            } => write!(
                 out,
                 "defwind {name} {} {rate} {gain} {} {}",
                 self.name_of(src),
                 self.name_of(pre),
                 self.name_of(post)
             )?,
-            Kind::Lpf { src, cutoff_hz, .. } => {
-                write!(out, "deflpf {name} {} {rate} {cutoff_hz}", self.name_of(src))?
-            }
-            Kind::Pid { src, kp, ki, kd, limits, .. } => {
+            Kind::Lpf { src, cutoff_hz, .. } => write!(
+                out,
+                "deflpf {name} {} {rate} {cutoff_hz}",
+                self.name_of(src)
+            )?,
+            Kind::Pid {
+                src,
+                kp,
+                ki,
+                kd,
+                limits,
+                ..
+            } => {
                 write!(out, "defpid {name} {} {rate}", self.name_of(src))?;
                 for o in [kp, ki, kd] {
                     out.write_char(' ')?;
@@ -188,17 +211,26 @@ impl<N: Real> Engine<N> {
             }
             Kind::AdcRaw { input, .. } => write!(out, "adc {} {rate}", Chan(input))?,
             Kind::PwmFixed { out: o, freq } => write!(out, "pwm {} {freq} {}", Out(o), sym.value)?,
-            Kind::PwmFollow { src, out: o, freq } => {
-                write!(out, "defpwm {name} {} {rate} {} {freq}", self.name_of(src), Out(o))?
-            }
+            Kind::PwmFollow { src, out: o, freq } => write!(
+                out,
+                "defpwm {name} {} {rate} {} {freq}",
+                self.name_of(src),
+                Out(o)
+            )?,
             Kind::GpioIn { pin } => write!(out, "gpio {pin} {rate}")?,
-            Kind::GpioOut { src, pin } => write!(out, "defgpio {name} {} {rate} {pin}", self.name_of(src))?,
+            Kind::GpioOut { src, pin } => {
+                write!(out, "defgpio {name} {} {rate} {pin}", self.name_of(src))?
+            }
             Kind::Infile { stream, .. } => {
-                let path = self.streams[stream as usize].map(|s| s.path).unwrap_or_default();
+                let path = self.streams[stream as usize]
+                    .map(|s| s.path)
+                    .unwrap_or_default();
                 write!(out, "infile {name} {rate} {path}")?
             }
             Kind::Log { src, stream } => {
-                let path = self.streams[stream as usize].map(|s| s.path).unwrap_or_default();
+                let path = self.streams[stream as usize]
+                    .map(|s| s.path)
+                    .unwrap_or_default();
                 write!(out, "log {name} {} {rate} {path}", self.name_of(src))?
             }
         }
@@ -236,16 +268,28 @@ impl<N: Real> Engine<N> {
         let mut w = crate::text::BufWriter::new(&mut line);
         let _ = self.write_definition(id, &mut w);
         let _ = writeln!(out, "{}", w.as_str());
-        let Some(sym) = self.sym(id).copied() else { return };
+        let Some(sym) = self.sym(id).copied() else {
+            return;
+        };
         let _ = write!(out, "{}: {}", sym.name, sym.kind.what());
         if let Some(t) = sym.task {
-            let _ = write!(out, ", updated at {} Hz, {} updates missed", Hz(t.mhz), t.missed);
+            let _ = write!(
+                out,
+                ", updated at {} Hz, {} updates missed",
+                Hz(t.mhz),
+                t.missed
+            );
         } else if sym.kind.is_lazy() {
             let _ = write!(out, ", evaluated on demand");
         }
         let mut first = true;
         self.users(id, |u| {
-            let _ = write!(out, "{}{}", if first { "; used by " } else { ", " }, self.name_of(u));
+            let _ = write!(
+                out,
+                "{}{}",
+                if first { "; used by " } else { ", " },
+                self.name_of(u)
+            );
             first = false;
         });
         let _ = writeln!(out);

@@ -69,11 +69,21 @@ pub(crate) enum Kind<N> {
     /// `defint`: trapezoid integral, periodic.
     Int { src: VarId, st: Trapezoid<N> },
     /// `defwind`: integral of `src + gain (post - pre)`, periodic (thesis Fig. 5.11).
-    Wind { src: VarId, gain: N, pre: VarId, post: VarId, st: Trapezoid<N> },
+    Wind {
+        src: VarId,
+        gain: N,
+        pre: VarId,
+        post: VarId,
+        st: Trapezoid<N>,
+    },
     /// `defdiff`: two-point derivative, periodic.
     Diff { src: VarId, st: TwoPoint<N> },
     /// `deflpf`: first-order low-pass, periodic.
-    Lpf { src: VarId, cutoff_hz: N, last_t: Option<u64> },
+    Lpf {
+        src: VarId,
+        cutoff_hz: N,
+        last_t: Option<u64>,
+    },
     /// `defpid`: `kp e + ki I(e) + kd D(e)`, optionally clamped with conditional integration.
     Pid {
         src: VarId,
@@ -91,7 +101,11 @@ pub(crate) enum Kind<N> {
     /// `pwm`: a fixed duty cycle in %, settable.
     PwmFixed { out: PwmOutput, freq: f32 },
     /// `defpwm`: the duty (%) follows `src`, periodic.
-    PwmFollow { src: VarId, out: PwmOutput, freq: f32 },
+    PwmFollow {
+        src: VarId,
+        out: PwmOutput,
+        freq: f32,
+    },
     /// `gpio`: a sampled input pin (0/1), periodic.
     GpioIn { pin: u8 },
     /// `defgpio`: drives `pin` high while `src >= 0.5`, periodic.
@@ -130,7 +144,10 @@ impl<N> Kind<N> {
 
     /// Evaluated on demand from its inputs (no state of its own).
     pub fn is_lazy(&self) -> bool {
-        matches!(self, Kind::Expr { .. } | Kind::Scale { .. } | Kind::Sat { .. })
+        matches!(
+            self,
+            Kind::Expr { .. } | Kind::Scale { .. } | Kind::Sat { .. }
+        )
     }
 
     /// Description for messages ("an ADC channel", ...).
@@ -186,7 +203,9 @@ impl<N> Kind<N> {
                 f(*pre);
                 f(*post);
             }
-            Kind::Pid { src, kp, ki, kd, .. } => {
+            Kind::Pid {
+                src, kp, ki, kd, ..
+            } => {
                 f(*src);
                 operand(kp, &mut f);
                 operand(ki, &mut f);
@@ -213,7 +232,12 @@ pub(crate) struct Task {
 
 impl Task {
     pub fn new(mhz: u32) -> Self {
-        Task { mhz, due: None, frac: 0, missed: 0 }
+        Task {
+            mhz,
+            due: None,
+            frac: 0,
+            missed: 0,
+        }
     }
 
     /// Advances `due` by `n` periods.
@@ -247,6 +271,8 @@ pub(crate) struct Symbol<N> {
 pub(crate) struct SymSet([u32; MAX_SYMBOLS.div_ceil(32)]);
 
 impl SymSet {
+    pub const EMPTY: SymSet = SymSet([0; MAX_SYMBOLS.div_ceil(32)]);
+
     pub fn insert(&mut self, id: usize) {
         self.0[id / 32] |= 1 << (id % 32);
     }

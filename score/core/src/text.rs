@@ -12,7 +12,10 @@ pub struct ShortStr<const N: usize> {
 impl<const N: usize> ShortStr<N> {
     /// The empty string.
     pub const fn new() -> Self {
-        Self { buf: [0; N], len: 0 }
+        Self {
+            buf: [0; N],
+            len: 0,
+        }
     }
 
     /// Copies `s` if it fits, else `None`.

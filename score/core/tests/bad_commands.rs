@@ -83,7 +83,10 @@ fn command_prints_the_error_line() {
     let mut b = MemBoard::default();
     let mut out = String::new();
     assert!(e.command("adc 0", &mut b, &mut out).is_err());
-    assert_eq!(out, "error: adc: missing frequency (usage: adc channel frequency)\n");
+    assert_eq!(
+        out,
+        "error: adc: missing frequency (usage: adc channel frequency)\n"
+    );
 }
 
 #[test]
@@ -95,8 +98,13 @@ fn full_table_is_refused_without_partial_changes() {
     }
     let before = e.clone();
     // Needs the target and two placeholders: only one slot is left.
-    let err = e.execute("defexp z p q +", &mut b, &mut String::new()).unwrap_err();
-    assert_eq!(err.to_string(), "defexp: no room: variables (capacity 64; see 'capacities')");
+    let err = e
+        .execute("defexp z p q +", &mut b, &mut String::new())
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "defexp: no room: variables (capacity 64; see 'capacities')"
+    );
     assert_eq!(e, before);
     run(&mut e, &mut b, "defexp z c1 c2 +");
     assert_eq!(e.len(), 64);

@@ -20,7 +20,12 @@ impl MemBoard {
         self
     }
     pub fn log(&self, path: &str) -> Vec<f64> {
-        let (_, lines) = self.logs.iter().rev().find(|(p, _)| p == path).expect("log exists");
+        let (_, lines) = self
+            .logs
+            .iter()
+            .rev()
+            .find(|(p, _)| p == path)
+            .expect("log exists");
         lines.iter().map(|l| l.parse().expect("number")).collect()
     }
 }
@@ -79,7 +84,11 @@ impl Gpio for MemBoard {
 
 impl DataFiles for MemBoard {
     fn open_input(&mut self, path: &str) -> Result<StreamId, HalError> {
-        let i = self.inputs.iter().position(|(p, _)| p == path).ok_or(HalError::Io)?;
+        let i = self
+            .inputs
+            .iter()
+            .position(|(p, _)| p == path)
+            .ok_or(HalError::Io)?;
         self.open.push(Some(i));
         Ok(StreamId((self.open.len() - 1) as u8))
     }

@@ -5,7 +5,13 @@ use common::{run, run_until, MemBoard};
 use score_core::{Engine, Error, Num, VarKind};
 
 fn engine() -> (Engine<Num>, MemBoard) {
-    (Engine::new(), MemBoard { adc_code: 330, ..Default::default() })
+    (
+        Engine::new(),
+        MemBoard {
+            adc_code: 330,
+            ..Default::default()
+        },
+    )
 }
 
 #[test]
@@ -16,9 +22,20 @@ fn adc_creates_raw_and_volts_pair_listed_in_ascii_order() {
     e.execute("printvars", &mut b, &mut out).unwrap();
     let lines: Vec<&str> = out.lines().filter(|l| !l.is_empty()).collect();
     // 330 * 3 / 1023 = 0.967742 (single ended); minus 1.5 differential.
-    assert_eq!(lines, ["ADC0 - 330.000000", "ADCA - 330.000000", "adc0 - 0.967742", "adca - -0.532258"]);
+    assert_eq!(
+        lines,
+        [
+            "ADC0 - 330.000000",
+            "ADCA - 330.000000",
+            "adc0 - 0.967742",
+            "adca - -0.532258"
+        ]
+    );
     let volts = e.info(e.lookup("adc0").unwrap()).unwrap();
-    assert_eq!((volts.kind, volts.unit, volts.rate_hz), (VarKind::AdcVolts, Some("V"), Some(100.0)));
+    assert_eq!(
+        (volts.kind, volts.unit, volts.rate_hz),
+        (VarKind::AdcVolts, Some("V"), Some(100.0))
+    );
 }
 
 #[test]
@@ -29,7 +46,10 @@ fn defexp_echoes_the_tree_and_forward_references_resolve() {
     assert_eq!(echo, ["-", "adca", "1.000000"]);
     // adca is a placeholder (reads 0) until the ADC exists, then the same slot is the channel.
     assert_eq!(e.value_of("target"), Some(-1.0));
-    assert_eq!(e.info(e.lookup("adca").unwrap()).unwrap().kind, VarKind::Undefined);
+    assert_eq!(
+        e.info(e.lookup("adca").unwrap()).unwrap().kind,
+        VarKind::Undefined
+    );
     run(&mut e, &mut b, "adc A 1000");
     let v = e.value_of("target").unwrap();
     assert!((v - (330.0 * 3.0 / 1023.0 - 1.5 - 1.0)).abs() < 1e-12);
@@ -43,7 +63,11 @@ fn cycles_through_bare_expressions_are_rejected_but_blocks_break_them() {
     let mut out = String::new();
     let err = e.execute("defexp c a 1 -", &mut b, &mut out).unwrap_err();
     assert!(matches!(err, Error::Cycle { .. }), "{err}");
-    assert!(err.to_string().contains("'c' would depend on itself through 'a'"), "{err}");
+    assert!(
+        err.to_string()
+            .contains("'c' would depend on itself through 'a'"),
+        "{err}"
+    );
     assert_eq!(e, before);
     assert!(e.execute("defexp x x 1 +", &mut b, &mut out).is_err());
     // Through an integrator the loop is fine (Fig. 5.13 b: Isine reads pi which reads Isine).
@@ -53,7 +77,11 @@ fn cycles_through_bare_expressions_are_rejected_but_blocks_break_them() {
 #[test]
 fn del_is_refused_with_the_list_of_users() {
     let (mut e, mut b) = engine();
-    run(&mut e, &mut b, "adc 0 100\ndefint I adc0 100\ndefexp P adc0 2 *\ndefexp Q P 1 +");
+    run(
+        &mut e,
+        &mut b,
+        "adc 0 100\ndefint I adc0 100\ndefexp P adc0 2 *\ndefexp Q P 1 +",
+    );
     let before = e.clone();
     let mut out = String::new();
     let err = e.execute("del adc0", &mut b, &mut out).unwrap_err();
@@ -69,12 +97,21 @@ fn del_is_refused_with_the_list_of_users() {
 #[test]
 fn set_changes_constants_and_refuses_computed_values() {
     let (mut e, mut b) = engine();
-    run(&mut e, &mut b, "defexp Kp 21\ndefexp u Kp 2 *\npwm 2 1000 25");
+    run(
+        &mut e,
+        &mut b,
+        "defexp Kp 21\ndefexp u Kp 2 *\npwm 2 1000 25",
+    );
     run(&mut e, &mut b, "set Kp 3\nset PWM2 40");
     assert_eq!(e.value_of("u"), Some(6.0));
     assert!((b.hw.duty[2] - 0.4).abs() < 1e-6);
-    let err = e.execute("set u 1", &mut b, &mut String::new()).unwrap_err();
-    assert_eq!(err.to_string(), "set: 'u' is an expression and cannot be set (constants, pwm duties and integrators can)");
+    let err = e
+        .execute("set u 1", &mut b, &mut String::new())
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "set: 'u' is an expression and cannot be set (constants, pwm duties and integrators can)"
+    );
     let info = e.info(e.lookup("Kp").unwrap()).unwrap();
     assert!(info.writable && !e.info(e.lookup("u").unwrap()).unwrap().writable);
 }
@@ -84,7 +121,11 @@ fn scheduler_runs_higher_rates_first_and_producers_first_at_equal_rates() {
     let (mut e, mut b) = engine();
     // The log is defined before its source, and at a lower rate than the integrator.
     b = b.with_input("in", vec![1.0, 2.0, 3.0, 4.0]);
-    run(&mut e, &mut b, "log L I 500 out\ndefint I x 1000\ninfile x 1000 in");
+    run(
+        &mut e,
+        &mut b,
+        "log L I 500 out\ndefint I x 1000\ninfile x 1000 in",
+    );
     run_until(&mut e, &mut b, 4_000);
     // x: 1,2,3,4 at t = 0..3 ms; I(0)=0, I(1ms)=1.5e-3, I(2)=4e-3, I(3)=7.5e-3; logged at 0, 2 ms
     // after the 1 kHz updates of the same instant.
@@ -130,12 +171,19 @@ fn save_writes_a_script_that_recreates_the_table() {
     e.save(&mut saved).unwrap();
     let (mut e2, mut b2) = engine();
     b2 = b2.with_input("sig.txt", vec![0.5]);
-    let body: String = saved.lines().filter(|l| !l.starts_with('#')).map(|l| format!("{l}\n")).collect();
+    let body: String = saved
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| format!("{l}\n"))
+        .collect();
     run(&mut e2, &mut b2, &body);
     let mut saved2 = String::new();
     e2.save(&mut saved2).unwrap();
     assert_eq!(saved, saved2);
-    assert!(saved.contains("defexp Kp 7\n") && saved.contains("defexp P adc1 Kp * D +\n"), "{saved}");
+    assert!(
+        saved.contains("defexp Kp 7\n") && saved.contains("defexp P adc1 Kp * D +\n"),
+        "{saved}"
+    );
     assert_eq!(e.len(), e2.len());
 }
 
@@ -158,16 +206,26 @@ fn rate_changes_the_update_frequency() {
     let t0 = e.next_deadline().unwrap();
     e.tick(t0, &mut b);
     assert_eq!(e.next_deadline(), Some(t0 + 10_000));
-    let err = e.execute("rate one 5", &mut b, &mut String::new()).unwrap_err();
-    assert!(err.to_string().contains("'one' is not a periodic variable"), "{err}");
+    let err = e
+        .execute("rate one 5", &mut b, &mut String::new())
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("'one' is not a periodic variable"),
+        "{err}"
+    );
 }
 
 #[test]
 fn pwm_outputs_belong_to_one_variable() {
     let (mut e, mut b) = engine();
     run(&mut e, &mut b, "defexp x 50\ndefpwm pw2 x 100 2 1000");
-    let err = e.execute("pwm B 250 25", &mut b, &mut String::new()).unwrap_err();
-    assert_eq!(err.to_string(), "pwm: 'B' is already driven by 'pw2' ('del pw2' first)");
+    let err = e
+        .execute("pwm B 250 25", &mut b, &mut String::new())
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "pwm: 'B' is already driven by 'pw2' ('del pw2' first)"
+    );
     run_until(&mut e, &mut b, 1);
     assert_eq!(e.value_of("pw2"), Some(50.0));
     assert!((b.hw.duty[2] - 0.5).abs() < 1e-7);

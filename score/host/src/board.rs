@@ -95,7 +95,9 @@ impl SimHw {
     fn outputs(out: PwmOutput) -> Option<(usize, Option<usize>)> {
         match out {
             PwmOutput::Single(n) if n < PWM_OUTPUTS => Some((n as usize, None)),
-            PwmOutput::Complementary(k) if 2 * k + 1 < PWM_OUTPUTS => Some((2 * k as usize, Some(2 * k as usize + 1))),
+            PwmOutput::Complementary(k) if 2 * k + 1 < PWM_OUTPUTS => {
+                Some((2 * k as usize, Some(2 * k as usize + 1)))
+            }
             _ => None,
         }
     }
@@ -118,7 +120,9 @@ impl Adc for SimHw {
         VREF
     }
     fn adc_configure(&mut self, input: AdcInput, _rate_hz: f32) -> Result<(), HalError> {
-        Self::index(input).map(|_| ()).ok_or(HalError::NoSuchChannel)
+        Self::index(input)
+            .map(|_| ())
+            .ok_or(HalError::NoSuchChannel)
     }
     fn adc_release(&mut self, _: AdcInput) {}
     fn adc_read(&mut self, input: AdcInput) -> Result<u16, HalError> {
@@ -145,12 +149,19 @@ impl Pwm for SimHw {
         for i in [Some(a), b].into_iter().flatten() {
             let sibling = i ^ 1;
             self.pwm[sibling].freq_hz = freq_hz;
-            self.pwm[i] = PwmState { on: true, freq_hz, duty: 0.0, inverted: Some(i) == b };
+            self.pwm[i] = PwmState {
+                on: true,
+                freq_hz,
+                duty: 0.0,
+                inverted: Some(i) == b,
+            };
         }
         Ok(freq_hz)
     }
     fn pwm_set_duty(&mut self, out: PwmOutput, duty: f32) -> f32 {
-        let Some((a, b)) = Self::outputs(out) else { return 0.0 };
+        let Some((a, b)) = Self::outputs(out) else {
+            return 0.0;
+        };
         let duty = duty.clamp(0.0, 1.0);
         self.pwm[a].duty = duty;
         if let Some(b) = b {
@@ -173,7 +184,10 @@ impl Gpio for SimHw {
         GPIO_PINS
     }
     fn gpio_configure(&mut self, pin: u8, output: bool) -> Result<(), HalError> {
-        let p = self.pin_output.get_mut(pin as usize).ok_or(HalError::NoSuchChannel)?;
+        let p = self
+            .pin_output
+            .get_mut(pin as usize)
+            .ok_or(HalError::NoSuchChannel)?;
         *p = output;
         Ok(())
     }
@@ -209,12 +223,20 @@ pub struct Files {
 impl Files {
     /// Files relative to `base`.
     pub fn new(base: impl Into<PathBuf>) -> Self {
-        Self { base: base.into(), slots: Vec::new(), dry: false }
+        Self {
+            base: base.into(),
+            slots: Vec::new(),
+            dry: false,
+        }
     }
 
     /// A copy that opens playback files for checking and never creates logs.
     pub fn dry_run(&self) -> Self {
-        Self { base: self.base.clone(), slots: Vec::new(), dry: true }
+        Self {
+            base: self.base.clone(),
+            slots: Vec::new(),
+            dry: true,
+        }
     }
 
     /// The base directory.
@@ -260,7 +282,13 @@ impl Files {
             }
             match t.parse::<f64>() {
                 Ok(v) if v.is_finite() => data.push(v),
-                _ => return Err(format!("{}:{}: '{t}' is not a number", path.display(), n + 1)),
+                _ => {
+                    return Err(format!(
+                        "{}:{}: '{t}' is not a number",
+                        path.display(),
+                        n + 1
+                    ))
+                }
             }
         }
         Ok(data)
@@ -290,8 +318,15 @@ impl DataFiles for Files {
     fn open_log(&mut self, path: &str) -> Result<StreamId, HalError> {
         let p = self.resolve(path);
         if self.dry {
-            let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-            return if dir.is_dir() { self.insert(Slot::Input(Vec::new())) } else { Err(HalError::Io) };
+            let dir = p
+                .parent()
+                .filter(|d| !d.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
+            return if dir.is_dir() {
+                self.insert(Slot::Input(Vec::new()))
+            } else {
+                Err(HalError::Io)
+            };
         }
         let f = File::create(&p).map_err(|e| {
             eprintln!("log: {}: {e}", p.display());
@@ -324,12 +359,18 @@ pub struct SimBoard {
 impl SimBoard {
     /// A board whose files are relative to `base`.
     pub fn new(base: impl Into<PathBuf>) -> Self {
-        Self { hw: SimHw::default(), files: Files::new(base) }
+        Self {
+            hw: SimHw::default(),
+            files: Files::new(base),
+        }
     }
 
     /// A copy for dry runs: same peripherals, files only checked.
     pub fn dry_run(&self) -> Self {
-        Self { hw: self.hw.clone(), files: self.files.dry_run() }
+        Self {
+            hw: self.hw.clone(),
+            files: self.files.dry_run(),
+        }
     }
 }
 

@@ -14,7 +14,11 @@ use clap::Parser;
 use score_host::{Session, TimeMode};
 
 #[derive(Parser, Debug)]
-#[command(name = "score", version, about = "Score signal-variable terminal (host port)")]
+#[command(
+    name = "score",
+    version,
+    about = "Score signal-variable terminal (host port)"
+)]
 struct Cli {
     /// Run this file of commands, then exit (after --run).
     #[arg(long, value_name = "FILE")]
@@ -39,7 +43,11 @@ struct Cli {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let batch = cli.script.is_some();
-    let mode = if cli.realtime || (!batch && !cli.simulated) { TimeMode::RealTime } else { TimeMode::Simulated };
+    let mode = if cli.realtime || (!batch && !cli.simulated) {
+        TimeMode::RealTime
+    } else {
+        TimeMode::Simulated
+    };
     let mut session = Session::new(mode, &cli.dir);
     session.echo_scripts = !cli.quiet;
     if let Some(path) = &cli.script {
@@ -77,7 +85,10 @@ fn repl(session: Session, quiet: bool) -> ExitCode {
         std::thread::spawn(move || {
             while !stop.load(Ordering::Relaxed) {
                 let wait = s.lock().map(|mut s| s.poll()).unwrap_or(None);
-                std::thread::sleep(wait.unwrap_or(Duration::from_millis(10)).min(Duration::from_millis(10)));
+                std::thread::sleep(
+                    wait.unwrap_or(Duration::from_millis(10))
+                        .min(Duration::from_millis(10)),
+                );
             }
         })
     });
@@ -103,17 +114,14 @@ fn repl(session: Session, quiet: bool) -> ExitCode {
     };
     if std::io::stdin().is_terminal() {
         match rustyline::DefaultEditor::new() {
-            Ok(mut ed) => loop {
-                match ed.readline(score_core::PROMPT) {
-                    Ok(line) => {
-                        let _ = ed.add_history_entry(line.as_str());
-                        if !handle(&line) {
-                            break;
-                        }
+            Ok(mut ed) => {
+                while let Ok(line) = ed.readline(score_core::PROMPT) {
+                    let _ = ed.add_history_entry(line.as_str());
+                    if !handle(&line) {
+                        break;
                     }
-                    Err(_) => break,
                 }
-            },
+            }
             Err(e) => eprintln!("line editor unavailable: {e}"),
         }
     } else {

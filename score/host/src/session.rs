@@ -115,7 +115,9 @@ impl Session {
         if self.engine.next_deadline().is_some_and(|d| d <= now) {
             self.engine.tick(now, &mut self.board);
         }
-        self.engine.next_deadline().map(|d| Duration::from_micros(d.saturating_sub(self.now_us())))
+        self.engine
+            .next_deadline()
+            .map(|d| Duration::from_micros(d.saturating_sub(self.now_us())))
     }
 
     /// Advances time by `seconds`: simulated, every update due before the end runs at its own
@@ -165,8 +167,10 @@ impl Session {
                 let mut text = String::new();
                 let _ = self.engine.save(&mut text);
                 let p = self.board.files.resolve(path);
-                std::fs::write(&p, text)
-                    .map_err(|e| SessionError::File { path: p.display().to_string(), message: e.to_string() })?;
+                std::fs::write(&p, text).map_err(|e| SessionError::File {
+                    path: p.display().to_string(),
+                    message: e.to_string(),
+                })?;
             }
             Outcome::Run(s) => self.advance(s),
         }
@@ -175,8 +179,10 @@ impl Session {
 
     fn read_script(&self, path: &str) -> Result<String, SessionError> {
         let p = self.board.files.resolve(path);
-        std::fs::read_to_string(&p)
-            .map_err(|e| SessionError::File { path: p.display().to_string(), message: e.to_string() })
+        std::fs::read_to_string(&p).map_err(|e| SessionError::File {
+            path: p.display().to_string(),
+            message: e.to_string(),
+        })
     }
 
     /// `script <file>`: runs the file's lines; stops at the first failing line.
@@ -192,7 +198,11 @@ impl Session {
                 let _ = writeln!(out, "{}{}", score_core::PROMPT, l.trim());
             }
             if let Err(e) = self.line(l, out) {
-                result = Err(SessionError::Script { path: path.to_string(), line: n + 1, source: Box::new(e) });
+                result = Err(SessionError::Script {
+                    path: path.to_string(),
+                    line: n + 1,
+                    source: Box::new(e),
+                });
                 break;
             }
         }
@@ -209,13 +219,18 @@ impl Session {
         let mut sink = String::new();
         for (n, l) in text.lines().enumerate() {
             let fail = |e: SessionError| {
-                SessionError::Load(Box::new(SessionError::Script { path: path.to_string(), line: n + 1, source: Box::new(e) }))
+                SessionError::Load(Box::new(SessionError::Script {
+                    path: path.to_string(),
+                    line: n + 1,
+                    source: Box::new(e),
+                }))
             };
             match dry.execute(l, &mut board, &mut sink) {
                 Ok(Outcome::Done) => {}
                 Ok(_) => {
                     return Err(fail(SessionError::Sim(
-                        "a loaded file holds definitions only (no script, load, save or run)".into(),
+                        "a loaded file holds definitions only (no script, load, save or run)"
+                            .into(),
                     )))
                 }
                 Err(e) => return Err(fail(e.into())),
@@ -223,11 +238,13 @@ impl Session {
         }
         self.engine.clear(&mut self.board);
         for (n, l) in text.lines().enumerate() {
-            self.engine.execute(l, &mut self.board, out).map_err(|e| SessionError::Script {
-                path: path.to_string(),
-                line: n + 1,
-                source: Box::new(e.into()),
-            })?;
+            self.engine
+                .execute(l, &mut self.board, out)
+                .map_err(|e| SessionError::Script {
+                    path: path.to_string(),
+                    line: n + 1,
+                    source: Box::new(e.into()),
+                })?;
         }
         Ok(())
     }

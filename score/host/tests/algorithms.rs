@@ -40,14 +40,23 @@ fn fig5_8_and_5_14_trapezoid_integral_and_two_point_derivative_of_sin() {
         // Composite trapezoid, Euler-Maclaurin: E = h^2/12 (f'(t) - f'(0)) + O(t h^4 max|f''''|/720)
         // with f = sin: |E| <= h^2/12 |cos t - 1| + t h^4/720. Rounding: per step about four
         // operations on values below 2, plus the input stored once: <= k (8u + u h).
-        let bound = H * H / 12.0 * (t.cos() - 1.0).abs() + t * H.powi(4) / 720.0 + k as f64 * (8.0 * u + u * H) + 1e-15;
+        let bound = H * H / 12.0 * (t.cos() - 1.0).abs()
+            + t * H.powi(4) / 720.0
+            + k as f64 * (8.0 * u + u * H)
+            + 1e-15;
         let err = (i - exact).abs();
-        assert!(err <= bound, "t={t}: integral {i}, exact {exact}, err {err:e} > {bound:e}");
+        assert!(
+            err <= bound,
+            "t={t}: integral {i}, exact {exact}, err {err:e} > {bound:e}"
+        );
         worst_int = worst_int.max(err);
     }
     // The thesis (Fig. 5.8) saw errors of order 1e-5: h^2/6 = 1.7e-5 is this method's ceiling.
     let ceiling = H * H / 6.0 + 10.0 * H.powi(4) / 720.0 + 1000.0 * (8.0 * u + u * H) + 1e-15;
-    assert!(worst_int <= ceiling, "worst integral error {worst_int:e} > {ceiling:e}");
+    assert!(
+        worst_int <= ceiling,
+        "worst integral error {worst_int:e} > {ceiling:e}"
+    );
     eprintln!("integral: worst error {worst_int:e} (ceiling {ceiling:e})");
 
     assert_eq!(dif[0], 0.0, "no derivative before two samples");
@@ -60,14 +69,19 @@ fn fig5_8_and_5_14_trapezoid_integral_and_two_point_derivative_of_sin() {
         let e_end = (d - t.cos()).abs();
         assert!(e_end <= H / 2.0 + rounding, "t={t}: {d} vs cos {}", t.cos());
         let e_mid = (d - (t - H / 2.0).cos()).abs();
-        assert!(e_mid <= H * H / 24.0 + rounding, "t={t}: {d} vs midpoint, err {e_mid:e}");
+        assert!(
+            e_mid <= H * H / 24.0 + rounding,
+            "t={t}: {d} vs midpoint, err {e_mid:e}"
+        );
     }
 }
 
 /// First time at or after `from` that a sampled signal goes below `level`.
 fn exit_time(signal: &[f64], level: f64, from: f64) -> f64 {
     let k0 = (from / H) as usize;
-    let k = (k0..signal.len()).find(|&k| signal[k] < level).expect("leaves saturation");
+    let k = (k0..signal.len())
+        .find(|&k| signal[k] < level)
+        .expect("leaves saturation");
     k as f64 * H
 }
 
@@ -88,8 +102,14 @@ fn fig5_13_anti_windup_leaves_saturation_early_and_plain_integrator_lags() {
     use std::f64::consts::{FRAC_PI_4, SQRT_2};
     let (_, plain) = run_script("fig5_13a.score", &[], 10.0);
     let (_, wind) = run_script("fig5_13b.score", &[], 10.0);
-    let (pre_a, post_a) = (numbers(&plain.join("PRESAT.LOG")), numbers(&plain.join("POSTSAT.LOG")));
-    let (pre_b, post_b) = (numbers(&wind.join("PRESAT2.LOG")), numbers(&wind.join("POSTSAT2.LOG")));
+    let (pre_a, post_a) = (
+        numbers(&plain.join("PRESAT.LOG")),
+        numbers(&plain.join("POSTSAT.LOG")),
+    );
+    let (pre_b, post_b) = (
+        numbers(&wind.join("PRESAT2.LOG")),
+        numbers(&wind.join("POSTSAT2.LOG")),
+    );
     for log in [&pre_a, &post_a, &pre_b, &post_b] {
         assert_eq!(log.len(), 1000);
     }
@@ -101,16 +121,26 @@ fn fig5_13_anti_windup_leaves_saturation_early_and_plain_integrator_lags() {
     // (pi/4, 5pi/4), peak 1 + sqrt2 at 3pi/4. Trapezoid error <= 1.7e-5 and the sampled peak
     // misses the true one by <= (h/2)^2/2 max|pi''| = 1.8e-5.
     let peak_a = pre_a.iter().cloned().fold(f64::MIN, f64::max);
-    assert!((peak_a - (1.0 + SQRT_2)).abs() < 1e-4, "plain peak {peak_a}");
+    assert!(
+        (peak_a - (1.0 + SQRT_2)).abs() < 1e-4,
+        "plain peak {peak_a}"
+    );
     let exit_a = exit_time(&post_a, 1.0, 3.0 * FRAC_PI_4);
-    assert!((exit_a - 5.0 * FRAC_PI_4).abs() <= 2.0 * H, "plain leaves at {exit_a}");
+    assert!(
+        (exit_a - 5.0 * FRAC_PI_4).abs() <= 2.0 * H,
+        "plain leaves at {exit_a}"
+    );
 
     // With anti-windup (gain 1): before saturation I = 1 - cos t; in saturation
     // I' = sin t + (1 - (sin t + I)) = 1 - I, so I = 1 - (1 - I_s) e^-(t - pi/4), I_s = 1 - cos pi/4,
     // and the output leaves saturation when sin t + I(t) = 1.
     let i_s = 1.0 - FRAC_PI_4.cos();
     let i_sat = |t: f64| 1.0 - (1.0 - i_s) * (-(t - FRAC_PI_4)).exp();
-    let exit_exact = bisect(|t| t.sin() + i_sat(t) - 1.0, std::f64::consts::FRAC_PI_2, std::f64::consts::PI);
+    let exit_exact = bisect(
+        |t| t.sin() + i_sat(t) - 1.0,
+        std::f64::consts::FRAC_PI_2,
+        std::f64::consts::PI,
+    );
     let peak_exact = (0..=10_000)
         .map(|j| FRAC_PI_4 + j as f64 * (exit_exact - FRAC_PI_4) / 10_000.0)
         .map(|t| t.sin() + i_sat(t))
@@ -119,12 +149,21 @@ fn fig5_13_anti_windup_leaves_saturation_early_and_plain_integrator_lags() {
     // constant 1 s): |I - I_exact| <= h sup|I'| <= h; the exit time moves by that over the slope
     // |d/dt (sin t + I)| >= 0.9 near the exit, plus one sample of detection: <= 3h in all.
     let exit_b = exit_time(&post_b, 1.0, FRAC_PI_4 + 0.1);
-    assert!((exit_b - exit_exact).abs() <= 3.0 * H, "anti-windup leaves at {exit_b}, analysis {exit_exact}");
+    assert!(
+        (exit_b - exit_exact).abs() <= 3.0 * H,
+        "anti-windup leaves at {exit_b}, analysis {exit_exact}"
+    );
     let peak_b = pre_b.iter().cloned().fold(f64::MIN, f64::max);
-    assert!((peak_b - peak_exact).abs() <= 2.0 * H, "anti-windup peak {peak_b}, analysis {peak_exact}");
+    assert!(
+        (peak_b - peak_exact).abs() <= 2.0 * H,
+        "anti-windup peak {peak_b}, analysis {peak_exact}"
+    );
     // The claim of Fig. 5.12: the anti-windup output returns to range while the plain one lags
     // (analysis: 3.07 s vs 3.93 s; the tolerances above cost at most 5h).
-    assert!(exit_b < exit_a - 0.8, "anti-windup {exit_b} s vs plain {exit_a} s");
+    assert!(
+        exit_b < exit_a - 0.8,
+        "anti-windup {exit_b} s vs plain {exit_a} s"
+    );
     assert!(peak_b < 2.0 && peak_a > 2.4);
 }
 
@@ -174,7 +213,10 @@ fn fig5_20_pid_matches_an_independent_discrete_pid() {
             // The 500 Hz log runs after the 1 kHz blocks of the same instant (rate-monotonic), so
             // log sample j is PID sample 2j.
             let r = reference[2 * j].0;
-            assert!((v - r).abs() <= bound, "{name}[{j}]: {v} vs {r} (bound {bound:e})");
+            assert!(
+                (v - r).abs() <= bound,
+                "{name}[{j}]: {v} vs {r} (bound {bound:e})"
+            );
         }
     }
     eprintln!(

@@ -21,10 +21,21 @@ fn every_thesis_script_runs_unchanged_in_batch_mode() {
     scripts.sort();
     assert_eq!(scripts.len(), 6, "{scripts:?}"); // Fig. 4.5, 5.4, 5.13 a and b, 5.15, 5.20
     for s in &scripts {
-        let out = score().args(["--script", s, "--run", "2", "--dir"]).arg(&dir).output().unwrap();
-        assert!(out.status.success(), "{s}: {}", String::from_utf8_lossy(&out.stderr));
+        let out = score()
+            .args(["--script", s, "--run", "2", "--dir"])
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{s}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let text = String::from_utf8_lossy(&out.stdout);
-        assert!(text.starts_with("$> var"), "{s}: transcript-style echo: {text}");
+        assert!(
+            text.starts_with("$> var"),
+            "{s}: transcript-style echo: {text}"
+        );
     }
     // Fig. 5.4: 2 s at 100 Hz.
     assert_eq!(common::numbers(&dir.join("prop")).len(), 200);
@@ -42,7 +53,10 @@ fn piped_session_prints_prompts_outputs_and_fails_on_errors() {
         .stdin
         .take()
         .unwrap()
-        .write_all("adc A 1000\nvar\ndefexp target adca 1 \u{2212}\nrun 0.1\nprintv target\nbogus\n".as_bytes())
+        .write_all(
+            "adc A 1000\nvar\ndefexp target adca 1 \u{2212}\nrun 0.1\nprintv target\nbogus\n"
+                .as_bytes(),
+        )
         .unwrap();
     let out = child.wait_with_output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
@@ -84,18 +98,41 @@ fn save_then_load_recreates_the_table_and_a_bad_file_changes_nothing() {
 #[test]
 fn script_errors_name_file_and_line() {
     let dir = common::workdir("script-error");
-    std::fs::write(dir.join("s.score"), "var\ndefexp k 2\nadc 9 100\ndefexp never 1\n").unwrap();
+    std::fs::write(
+        dir.join("s.score"),
+        "var\ndefexp k 2\nadc 9 100\ndefexp never 1\n",
+    )
+    .unwrap();
     let mut s = Session::new(TimeMode::Simulated, &dir);
     let err = s.line("script s.score", &mut String::new()).unwrap_err();
-    assert_eq!(err.to_string(), "s.score:3: adc: '9' is not an ADC channel of this board (expected 0-3, A-B or T)");
+    assert_eq!(
+        err.to_string(),
+        "s.score:3: adc: '9' is not an ADC channel of this board (expected 0-3, A-B or T)"
+    );
     assert!(s.engine().lookup("k").is_some() && s.engine().lookup("never").is_none());
 }
 
 #[test]
 fn real_time_mode_updates_on_the_wall_clock() {
     let dir = common::workdir("realtime");
-    std::fs::write(dir.join("rt.score"), "infile x 100 100SIN.HZ\nlog x 100 rt.log\n").unwrap();
-    let out = score().args(["--realtime", "-q", "--script", "rt.score", "--run", "0.3", "--dir"]).arg(&dir).output().unwrap();
+    std::fs::write(
+        dir.join("rt.score"),
+        "infile x 100 100SIN.HZ\nlog x 100 rt.log\n",
+    )
+    .unwrap();
+    let out = score()
+        .args([
+            "--realtime",
+            "-q",
+            "--script",
+            "rt.score",
+            "--run",
+            "0.3",
+            "--dir",
+        ])
+        .arg(&dir)
+        .output()
+        .unwrap();
     assert!(out.status.success());
     // 100 Hz for 0.3 s of wall time: 30 updates when on time; a slow machine skips (and counts)
     // late ones instead of bursting, so fewer, never more than 31.

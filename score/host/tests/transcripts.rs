@@ -10,7 +10,11 @@ use std::collections::BTreeMap;
 use score_host::{Session, TimeMode};
 
 fn normalize(s: &str) -> String {
-    s.replace('\u{2212}', "-").replace(['\u{2019}', '\u{2018}'], "'").split_whitespace().collect::<Vec<_>>().join(" ")
+    s.replace('\u{2212}', "-")
+        .replace(['\u{2019}', '\u{2018}'], "'")
+        .split_whitespace()
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// `NAME - 1.234567` (six decimals, as printvars writes).
@@ -32,7 +36,10 @@ fn parse(text: &str) -> (Vec<String>, Vec<Step>) {
     for raw in text.lines() {
         let line = normalize(raw);
         if let Some(cmd) = line.strip_prefix("$>") {
-            steps.push(Step { command: cmd.trim().to_string(), expected: Vec::new() });
+            steps.push(Step {
+                command: cmd.trim().to_string(),
+                expected: Vec::new(),
+            });
         } else if line.is_empty() {
             continue;
         } else if let Some(step) = steps.last_mut() {
@@ -53,14 +60,20 @@ type Check = fn(&BTreeMap<String, f64>);
 /// at most 5e-7 of rounding (six decimals), so |a - f| <= 5e-7 (1 + gain).
 fn close(a: f64, b: f64, gain: f64, what: &str) {
     let tol = 5e-7 * (1.0 + gain) + 1e-12;
-    assert!((a - b).abs() <= tol, "{what}: {a} vs {b} (tolerance {tol:e})");
+    assert!(
+        (a - b).abs() <= tol,
+        "{what}: {a} vs {b} (tolerance {tol:e})"
+    );
 }
 
 /// A PWM variable reports the duty the HAL produced; the HAL takes the duty as an f32 fraction
 /// (<= 2^-25 absolute rounding below 1, i.e. 3e-6 %), on top of the printing rounding.
 fn close_duty(duty: f64, source: f64, what: &str) {
     let tol = 1e-6 + 100.0 * 2f64.powi(-25);
-    assert!((duty - source).abs() <= tol, "{what}: {duty} vs {source} (tolerance {tol:e})");
+    assert!(
+        (duty - source).abs() <= tol,
+        "{what}: {duty} vs {source} (tolerance {tol:e})"
+    );
 }
 
 fn run_transcript(file: &str, check: Check) {
@@ -69,22 +82,44 @@ fn run_transcript(file: &str, check: Check) {
     let mut ours = String::new();
     score_core::write_banner(&mut ours).unwrap();
     let ours: Vec<String> = ours.lines().map(normalize).collect();
-    for line in banner.iter().filter(|l| !l.contains("SEEPS") && !l.contains("Sherbert")) {
-        assert!(ours.contains(line), "{file}: banner line {line:?} missing from {ours:?}");
+    for line in banner
+        .iter()
+        .filter(|l| !l.contains("SEEPS") && !l.contains("Sherbert"))
+    {
+        assert!(
+            ours.contains(line),
+            "{file}: banner line {line:?} missing from {ours:?}"
+        );
     }
     let mut session = Session::new(TimeMode::Simulated, common::workdir(file));
     assert!(!steps.is_empty());
     for step in &steps {
         let mut out = String::new();
-        session.line(&step.command, &mut out).unwrap_or_else(|e| panic!("{file}: {}: {e}", step.command));
-        let actual: Vec<String> = out.lines().map(normalize).filter(|l| !l.is_empty()).collect();
-        let expected_vars: Vec<(String, f64)> = step.expected.iter().filter_map(|l| var_line(l)).collect();
+        session
+            .line(&step.command, &mut out)
+            .unwrap_or_else(|e| panic!("{file}: {}: {e}", step.command));
+        let actual: Vec<String> = out
+            .lines()
+            .map(normalize)
+            .filter(|l| !l.is_empty())
+            .collect();
+        let expected_vars: Vec<(String, f64)> =
+            step.expected.iter().filter_map(|l| var_line(l)).collect();
         if !expected_vars.is_empty() && expected_vars.len() == step.expected.len() {
             // A printvars listing: exactly the same variables in the same order.
             let got: Vec<(String, f64)> = actual.iter().filter_map(|l| var_line(l)).collect();
             let names = |v: &[(String, f64)]| v.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
-            assert_eq!(names(&got), names(&expected_vars), "{file}: {}", step.command);
-            assert_eq!(got.len(), actual.len(), "{file}: only variable lines expected: {actual:?}");
+            assert_eq!(
+                names(&got),
+                names(&expected_vars),
+                "{file}: {}",
+                step.command
+            );
+            assert_eq!(
+                got.len(),
+                actual.len(),
+                "{file}: only variable lines expected: {actual:?}"
+            );
             check(&got.into_iter().collect());
         } else {
             // Other output: every expected line, in order (extra lines such as our longer menus
@@ -93,7 +128,10 @@ fn run_transcript(file: &str, check: Check) {
             for e in &step.expected {
                 let found = actual[at..].iter().position(|a| a == e);
                 let Some(i) = found else {
-                    panic!("{file}: after {:?} expected {e:?} in {actual:?}", step.command)
+                    panic!(
+                        "{file}: after {:?} expected {e:?} in {actual:?}",
+                        step.command
+                    )
                 };
                 at += i + 1;
             }
@@ -108,7 +146,11 @@ fn adc_pairs(v: &BTreeMap<String, f64>) {
     for (name, raw) in v.iter().filter(|(n, _)| n.starts_with("ADC")) {
         let suffix = &name[3..];
         let volts = v[&format!("adc{}", suffix.to_lowercase())];
-        let offset = if suffix.chars().all(|c| c.is_ascii_digit()) { 0.0 } else { 1.5 };
+        let offset = if suffix.chars().all(|c| c.is_ascii_digit()) {
+            0.0
+        } else {
+            1.5
+        };
         close(volts, raw * 3.0 / 1023.0 - offset, 0.0, name);
     }
 }
@@ -118,7 +160,12 @@ fn fig5_1_adc_initialisation() {
     run_transcript("fig5_1.transcript", |v| {
         adc_pairs(v);
         // The ladder of the simulated board, like the thesis' (0.96, 2.68, 1.83, 0.98 V).
-        for (n, volts) in [("adc0", 0.97), ("adc1", 2.68), ("adc2", 1.83), ("adc3", 0.98)] {
+        for (n, volts) in [
+            ("adc0", 0.97),
+            ("adc1", 2.68),
+            ("adc2", 1.83),
+            ("adc3", 0.98),
+        ] {
             assert!((v[n] - volts).abs() < 0.01, "{n} = {}", v[n]);
         }
     });
@@ -134,7 +181,12 @@ fn fig5_2_pwm_sessions() {
 fn fig5_6_proportional_configuration() {
     run_transcript("fig5_6.transcript", |v| {
         adc_pairs(v);
-        close(v["Padca"], ((v["adca"] + 1.5) / 3.0 * 100.0).clamp(0.0, 100.0), 100.0 / 3.0, "Padca");
+        close(
+            v["Padca"],
+            ((v["adca"] + 1.5) / 3.0 * 100.0).clamp(0.0, 100.0),
+            100.0 / 3.0,
+            "Padca",
+        );
         // pw2 follows Padca at 1 kHz, the rate of the ADC: sampled at the same instant.
         close_duty(v["pw2"], v["Padca"], "pw2");
     });
@@ -145,12 +197,22 @@ fn fig5_9_integral_configuration() {
     run_transcript("fig5_9.transcript", |v| {
         adc_pairs(v);
         let scale = |x: f64, a: f64, b: f64| ((x - a) / (b - a) * 100.0).clamp(0.0, 100.0);
-        close(v["SIadca"], scale(v["Iadca"], -1.8, -1.2), 100.0 / 0.6, "SIadca");
+        close(
+            v["SIadca"],
+            scale(v["Iadca"], -1.8, -1.2),
+            100.0 / 0.6,
+            "SIadca",
+        );
         close(v["SIIadca"], scale(v["Iadca"], -0.5, 0.5), 100.0, "SIIadca");
         // The second defpwm replaced the first: pw2 follows SIIadca, but at 100 Hz while Iadca
         // moves at 1 kHz: pw2 lags by up to 10 ms, in which Iadca moves at most 10 ms x |adca|
         // <= 0.015 (|adca| <= 1.5 V), i.e. 1.5 % after the x100 scale.
-        assert!((v["pw2"] - v["SIIadca"]).abs() <= 1.5, "pw2 {} vs SIIadca {}", v["pw2"], v["SIIadca"]);
+        assert!(
+            (v["pw2"] - v["SIIadca"]).abs() <= 1.5,
+            "pw2 {} vs SIIadca {}",
+            v["pw2"],
+            v["SIIadca"]
+        );
     });
 }
 
@@ -169,7 +231,12 @@ fn fig5_25_negative_feedback_configuration() {
         adc_pairs(v);
         close(v["target"], v["adca"] - 1.0, 1.0, "target");
         if let Some(s) = v.get("Starget") {
-            close(*s, ((v["target"] + 1.5) / 3.0 * 100.0).clamp(0.0, 100.0), 100.0 / 3.0, "Starget");
+            close(
+                *s,
+                ((v["target"] + 1.5) / 3.0 * 100.0).clamp(0.0, 100.0),
+                100.0 / 3.0,
+                "Starget",
+            );
         }
     });
 }

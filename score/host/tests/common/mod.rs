@@ -33,7 +33,8 @@ pub fn run_script(script: &str, extra: &[&str], seconds: f64) -> (Session, PathB
     let dir = workdir(script);
     let mut s = Session::new(TimeMode::Simulated, &dir);
     let mut out = String::new();
-    s.script(script, &mut out).unwrap_or_else(|e| panic!("{script}: {e}\n{out}"));
+    s.script(script, &mut out)
+        .unwrap_or_else(|e| panic!("{script}: {e}\n{out}"));
     for l in extra {
         s.line(l, &mut out).unwrap_or_else(|e| panic!("{l}: {e}"));
     }
