@@ -485,14 +485,26 @@ impl<N: Real> Engine<N> {
                 match *limits {
                     None => u,
                     Some((lo, hi)) => {
-                        // Conditional integration: an integral that would push further into
-                        // saturation is held.
-                        if (u > hi && e * ki > N::ZERO) || (u < lo && e * ki < N::ZERO) {
-                            int.acc = before;
-                            clamp(kp * e + ki * before + kd * d_term, lo, hi)
+                        // Conditional integration: a step that would push the output further
+                        // into saturation only goes as far as the limit (never past the value
+                        // before the step, so it neither winds up nor unwinds by itself).
+                        let limit = if u > hi && e * ki > N::ZERO {
+                            Some(hi)
+                        } else if u < lo && e * ki < N::ZERO {
+                            Some(lo)
                         } else {
-                            clamp(u, lo, hi)
+                            None
+                        };
+                        if let Some(limit) = limit {
+                            let target = (limit - kp * e - kd * d_term) / ki;
+                            let (a, b) = if before <= i_term {
+                                (before, i_term)
+                            } else {
+                                (i_term, before)
+                            };
+                            int.acc = clamp(target, a, b);
                         }
+                        clamp(kp * e + ki * int.acc + kd * d_term, lo, hi)
                     }
                 }
             }
