@@ -57,9 +57,10 @@ fn parse(text: &str) -> (Vec<String>, Vec<Step>) {
 type Check = fn(&BTreeMap<String, f64>);
 
 /// `a` = f(inputs) where f has gain `gain` from its printed inputs: every printed value carries
-/// at most 5e-7 of rounding (six decimals), so |a - f| <= 5e-7 (1 + gain).
+/// at most 5e-7 of rounding (six decimals), so |a - f| <= 5e-7 (1 + gain); the engine computed f
+/// in its number type with at most four roundings, 4u|a| more (u: unit roundoff of `Num`).
 fn close(a: f64, b: f64, gain: f64, what: &str) {
-    let tol = 5e-7 * (1.0 + gain) + 1e-12;
+    let tol = 5e-7 * (1.0 + gain) + 4.0 * common::unit_roundoff() * a.abs().max(b.abs()) + 1e-12;
     assert!(
         (a - b).abs() <= tol,
         "{what}: {a} vs {b} (tolerance {tol:e})"
@@ -69,7 +70,7 @@ fn close(a: f64, b: f64, gain: f64, what: &str) {
 /// A PWM variable reports the duty the HAL produced; the HAL takes the duty as an f32 fraction
 /// (<= 2^-25 absolute rounding below 1, i.e. 3e-6 %), on top of the printing rounding.
 fn close_duty(duty: f64, source: f64, what: &str) {
-    let tol = 1e-6 + 100.0 * 2f64.powi(-25);
+    let tol = 1e-6 + 100.0 * 2f64.powi(-25) + 4.0 * common::unit_roundoff() * duty.abs();
     assert!(
         (duty - source).abs() <= tol,
         "{what}: {duty} vs {source} (tolerance {tol:e})"
