@@ -6,6 +6,8 @@
 //! clock ([`session::TimeMode`]: simulated, deterministic and as fast as the CPU allows, or real
 //! time). The `score` binary adds the REPL and `--script` batch runs.
 
+#![deny(missing_docs)]
+
 pub mod board;
 pub mod session;
 
