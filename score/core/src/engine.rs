@@ -541,7 +541,7 @@ impl<N: Real> Engine<N> {
                 if let Some(id) = self.stream_id(*stream) {
                     let mut buf = [0u8; 48];
                     let mut w = BufWriter::new(&mut buf);
-                    if write!(w, "{x}").is_ok() {
+                    if write!(w, "{}", crate::num::Compact(x)).is_ok() {
                         hal.write_log(id, w.as_str());
                     }
                 }

@@ -56,6 +56,9 @@ pub use vars::{VarInfo, VarKind};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct VarId(pub u8);
 
+/// Bytes of an [`Engine`] with this build's [`Num`] and capacities (for firmware reports).
+pub const ENGINE_BYTES: usize = core::mem::size_of::<Engine<Num>>();
+
 /// The terminal prompt of the thesis.
 pub const PROMPT: &str = "$> ";
 

@@ -14,6 +14,7 @@ pub trait Real:
     + PartialOrd
     + Debug
     + Display
+    + core::fmt::LowerExp
     + Default
     + Add<Output = Self>
     + Sub<Output = Self>
@@ -135,6 +136,21 @@ impl_real!(
     libm::fabs
 );
 
+/// Shortest text that reads back as the same value: plain decimals for ordinary magnitudes,
+/// exponent form (`1.5e-9`) for very small or large ones so a line stays short (logs, `save`).
+pub struct Compact<N>(pub N);
+
+impl<N: Real> core::fmt::Display for Compact<N> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let a = self.0.abs().to_f64();
+        if a == 0.0 || (1e-5..1e15).contains(&a) || !a.is_finite() {
+            write!(f, "{}", self.0)
+        } else {
+            write!(f, "{:e}", self.0)
+        }
+    }
+}
+
 /// The number type selected for this build: `f64` by default, `f32` with the `f32` feature.
 #[cfg(not(feature = "f32"))]
 pub type Num = f64;
@@ -156,6 +172,18 @@ mod tests {
         assert_eq!(f64::parse_finite("-.5"), Some(-0.5));
         assert_eq!(f64::parse_finite("1e-3"), Some(1e-3));
         assert_eq!(f32::parse_finite("0.0788"), Some(0.0788f32));
+    }
+
+    #[test]
+    fn compact_text_reads_back_exactly() {
+        extern crate std;
+        use std::string::ToString;
+        for v in [0.0, -1.5, 0.0788, 1e-300, -2.5e20, 123456.789, 1.0 / 3.0] {
+            let t = Compact(v).to_string();
+            assert!(t.len() <= 24, "{t}");
+            assert_eq!(t.parse::<f64>().unwrap(), v);
+        }
+        assert_eq!(Compact(1e-9f32).to_string(), "1e-9");
     }
 
     #[test]

@@ -7,7 +7,7 @@ use crate::capacity::{MAX_EXPR_TOKENS, MAX_SYMBOLS};
 use crate::engine::Engine;
 use crate::expr::{op_word, un_word, Op};
 use crate::hal::{AdcInput, PwmOutput};
-use crate::num::Real;
+use crate::num::{Compact, Real};
 use crate::symbol::{Kind, Operand};
 use crate::VarId;
 
@@ -57,7 +57,7 @@ impl fmt::Display for Out {
 impl<N: Real> Engine<N> {
     fn write_operand(&self, out: &mut dyn Write, o: Operand<N>) -> fmt::Result {
         match o {
-            Operand::Lit(v) => write!(out, "{v}"),
+            Operand::Lit(v) => write!(out, "{}", Compact(v)),
             Operand::Var(id) => out.write_str(self.name_of(id)),
         }
     }
@@ -154,12 +154,12 @@ impl<N: Real> Engine<N> {
         let rate = Hz(sym.task.map_or(0, |t| t.mhz));
         match sym.kind {
             Kind::Placeholder | Kind::AdcVolts { .. } => return Ok(false),
-            Kind::Const => write!(out, "defexp {name} {}", sym.value)?,
+            Kind::Const => write!(out, "defexp {name} {}", Compact(sym.value))?,
             Kind::Expr { start, len } => {
                 write!(out, "defexp {name}")?;
                 for op in &self.ops[start as usize..(start + len) as usize] {
                     match *op {
-                        Op::Lit(v) => write!(out, " {v}")?,
+                        Op::Lit(v) => write!(out, " {}", Compact(v))?,
                         Op::Var(v) => write!(out, " {}", self.name_of(v))?,
                         Op::Bin(b) => write!(out, " {}", op_word(b))?,
                         Op::Un(u) => write!(out, " {}", un_word(u))?,
@@ -167,6 +167,7 @@ impl<N: Real> Engine<N> {
                 }
             }
             Kind::Scale { src, a, b, c, d } => {
+                let (a, b, c, d) = (Compact(a), Compact(b), Compact(c), Compact(d));
                 write!(out, "defscale {name} {} {a} {b} {c} {d}", self.name_of(src))?
             }
             Kind::Sat { src, lo, hi } => {
@@ -182,8 +183,9 @@ impl<N: Real> Engine<N> {
                 ..
             } => write!(
                 out,
-                "defwind {name} {} {rate} {gain} {} {}",
+                "defwind {name} {} {rate} {} {} {}",
                 self.name_of(src),
+                Compact(gain),
                 self.name_of(pre),
                 self.name_of(post)
             )?,
@@ -206,11 +208,13 @@ impl<N: Real> Engine<N> {
                     self.write_operand(out, o)?;
                 }
                 if let Some((lo, hi)) = limits {
-                    write!(out, " {lo} {hi}")?;
+                    write!(out, " {} {}", Compact(lo), Compact(hi))?;
                 }
             }
             Kind::AdcRaw { input, .. } => write!(out, "adc {} {rate}", Chan(input))?,
-            Kind::PwmFixed { out: o, freq } => write!(out, "pwm {} {freq} {}", Out(o), sym.value)?,
+            Kind::PwmFixed { out: o, freq } => {
+                write!(out, "pwm {} {freq} {}", Out(o), Compact(sym.value))?
+            }
             Kind::PwmFollow { src, out: o, freq } => write!(
                 out,
                 "defpwm {name} {} {rate} {} {freq}",
