@@ -411,7 +411,7 @@ impl<N: Real> Engine<N> {
                     task.due.unwrap_or(now)
                 }
             };
-            task.advance(t, 1);
+            task.advance_one(t);
             if let Some(s) = &mut self.syms[i] {
                 s.task = Some(task);
             }

@@ -27,6 +27,8 @@ pub trait Real:
     const ZERO: Self;
     /// 1.
     const ONE: Self;
+    /// 0.5 (halving by multiplication is exact and, in soft float, cheaper than dividing).
+    const HALF: Self;
     /// Not a number.
     const NAN: Self;
     /// Machine epsilon (distance from 1 to the next representable value).
@@ -62,6 +64,7 @@ macro_rules! impl_real {
         impl Real for $t {
             const ZERO: Self = 0.0;
             const ONE: Self = 1.0;
+            const HALF: Self = 0.5;
             const NAN: Self = <$t>::NAN;
             const EPSILON: Self = <$t>::EPSILON;
             const NAME: &'static str = $name;

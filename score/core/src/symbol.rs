@@ -26,7 +26,7 @@ impl<N: Real> Trapezoid<N> {
     pub fn step(&mut self, t_us: u64, x: N) -> N {
         if let Some((t0, x0)) = self.last {
             let dt = N::seconds_from_us(t_us.saturating_sub(t0));
-            self.acc = self.acc + (x0 + x) * dt / N::from_u32(2);
+            self.acc = self.acc + (x0 + x) * dt * N::HALF;
         }
         self.last = Some((t_us, x));
         self.acc
@@ -217,43 +217,74 @@ impl<N> Kind<N> {
 }
 
 /// The schedule of a periodic variable. The k-th update falls at `t0 + k * 1e9 / rate_mhz` µs,
-/// kept exact with an integer remainder, so rates like 3 Hz never drift.
+/// kept exact with an integer remainder, so rates like 3 Hz never drift. The period's whole and
+/// fractional microseconds are precomputed: an on-time update costs no division.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Task {
     /// Rate in millihertz.
     pub mhz: u32,
+    /// Whole microseconds of the period (`1e9 / mhz`).
+    q: u32,
+    /// Fractional part of the period, in units of 1/mhz µs (`1e9 % mhz`).
+    r: u32,
     /// Next update instant; `None` = at the next tick.
     pub due: Option<u64>,
-    /// Remainder of the period's fractional microseconds, in units of 1/mhz µs.
-    pub frac: u32,
+    /// Accumulated fractional microseconds, in units of 1/mhz µs.
+    frac: u32,
     /// Updates skipped because the port called `tick` more than a period late.
     pub missed: u32,
 }
 
 impl Task {
     pub fn new(mhz: u32) -> Self {
-        Task {
-            mhz,
+        let mut t = Task {
+            mhz: 1,
+            q: 0,
+            r: 0,
             due: None,
             frac: 0,
             missed: 0,
-        }
+        };
+        t.set_rate(mhz);
+        t
     }
 
-    /// Advances `due` by `n` periods.
+    /// Changes the rate; the next update stays where it was.
+    pub fn set_rate(&mut self, mhz: u32) {
+        self.mhz = mhz.max(1);
+        self.q = 1_000_000_000 / self.mhz;
+        self.r = 1_000_000_000 % self.mhz;
+        self.frac = 0;
+    }
+
+    /// Sets `due` one period after `from`.
+    #[inline]
+    pub fn advance_one(&mut self, from: u64) {
+        // frac < mhz and r < mhz, so the sum fits in u64 and carries at most one microsecond.
+        let f = self.frac as u64 + self.r as u64;
+        let carry = (f >= self.mhz as u64) as u64;
+        self.frac = (f - carry * self.mhz as u64) as u32;
+        self.due = Some(from.saturating_add(self.q as u64 + carry));
+    }
+
+    /// Sets `due` `n` periods after `from` (the late path: 128-bit arithmetic).
     pub fn advance(&mut self, from: u64, n: u64) {
-        let mhz = self.mhz.max(1) as u128;
-        let q = 1_000_000_000u128 / mhz;
-        let r = 1_000_000_000u128 % mhz;
-        let total_frac = self.frac as u128 + r * n as u128;
-        let due = from as u128 + q * n as u128 + total_frac / mhz;
+        let mhz = self.mhz as u128;
+        let total_frac = self.frac as u128 + self.r as u128 * n as u128;
+        let due = from as u128 + self.q as u128 * n as u128 + total_frac / mhz;
         self.due = Some(due.min(u64::MAX as u128) as u64);
         self.frac = (total_frac % mhz) as u32;
     }
 
     /// Whole periods between `due` and `now` (how far behind the task is).
+    #[inline]
     pub fn periods_behind(&self, due: u64, now: u64) -> u64 {
-        ((now - due) as u128 * self.mhz as u128 / 1_000_000_000u128) as u64
+        let late = now - due;
+        if late < self.q as u64 {
+            0
+        } else {
+            (late as u128 * self.mhz as u128 / 1_000_000_000u128) as u64
+        }
     }
 }
 

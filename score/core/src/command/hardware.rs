@@ -299,8 +299,7 @@ impl<N: Real> Engine<N> {
             hal.adc_configure(input, rate as f32 / 1000.0)
                 .map_err(|e| hal_err("rate", n, e))?;
         }
-        task.mhz = rate;
-        task.frac = 0;
+        task.set_rate(rate);
         if let Some(s) = &mut self.syms[id.0 as usize] {
             s.task = Some(task);
         }
