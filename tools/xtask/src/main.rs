@@ -2,8 +2,9 @@
 //! in seconds on a fresh machine.
 //!
 //! * `setup` — installs what the test suite needs and the machine may lack: the Python venv with
-//!   the interop packages (`tools/python-requirements.txt`).
-//! * `test`  — `setup`, then every test of the workspace.
+//!   the interop packages (`tools/python-requirements.txt`) and the `thumbv6m-none-eabi` target.
+//! * `test`  — `setup`, then every test of the workspace, the f32 build of Score, and the no_std
+//!   crates built for the RP2040's Cortex-M0+.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -57,11 +58,29 @@ fn run(cmd: &mut Command) -> Result {
 fn setup() -> Result<Vec<(String, String)>> {
     let t = Instant::now();
     let python = python_venv()?;
+    rust_target(THUMB)?;
     eprintln!("xtask: setup done in {:.1} s", t.elapsed().as_secs_f64());
     Ok(vec![(
         "CONDUCTOR_PYTHON".into(),
         python.display().to_string(),
     )])
+}
+
+/// The RP2040's target: Cortex-M0+, no FPU.
+const THUMB: &str = "thumbv6m-none-eabi";
+
+fn rust_target(target: &str) -> Result {
+    let installed = Command::new("rustup")
+        .args(["target", "list", "--installed"])
+        .output()
+        .map_err(|e| format!("rustup: {e}"))?;
+    if String::from_utf8_lossy(&installed.stdout)
+        .lines()
+        .any(|l| l.trim() == target)
+    {
+        return Ok(());
+    }
+    run(Command::new("rustup").args(["target", "add", target]))
 }
 
 /// `.venv` with the pinned interop packages; reinstalled only when the requirements change.

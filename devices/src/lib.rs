@@ -1,0 +1,34 @@
+//! # conductor-devices
+//!
+//! The communication section of Conductor (thesis §2.4): **Device** (a node on a bus: tags
+//! requests with its credential, interprets replies), **Protocol** (a vendor's packet format:
+//! bundles a tick's requests into the fewest packets, scans received words into replies) and
+//! **Hardware** (the gatekeeper that moves words on and off the bus without blocking).
+//!
+//! Data flow, per executor tick (each stage at its own divisor of the base rate):
+//!
+//! ```text
+//! downstream: State ─sample/write→ Device ─Request→ Protocol ─words→ Hardware ─→ bus
+//! upstream:   bus ─→ Hardware ─words→ Protocol ─Reply→ Device ─Update→ State
+//! ```
+//!
+//! Stages exchange work through fixed-capacity [`Bounded`] queues sized at start-up; nothing here
+//! allocates, locks or blocks once built. Components are chosen by `kind` in the manifest through
+//! [`kinds`], whose parameter specs also drive manifest validation.
+
+#![warn(missing_docs)]
+
+pub mod kinds;
+mod message;
+mod outstanding;
+mod queue;
+pub mod sim;
+mod stage;
+
+pub use message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
+pub use outstanding::{Outstanding, Pending};
+pub use queue::{Bounded, Full};
+pub use stage::{
+    Channel, Device, Hardware, HwError, Link, LinkOf, Protocol, ProtocolCounters, SafeAction,
+    TickCtx,
+};
