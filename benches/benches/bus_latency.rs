@@ -33,11 +33,12 @@ const ROLE: &str = "CONDUCTOR_BENCH_ROLE";
 const STOP: u64 = u64::MAX;
 const MODES: [&str; 4] = ["raw-busy", "state-busy", "raw-event", "state-event"];
 
+/// Pins the calling thread to `cpu`. The id is set directly: a child inherits its parent's
+/// affinity mask, so `get_core_ids()` there would only list the parent's CPU. On a
+/// single-CPU machine both sides share CPU 0.
 fn pin(cpu: usize) {
-    if let Some(ids) = core_affinity::get_core_ids() {
-        if let Some(id) = ids.get(cpu % ids.len()) {
-            core_affinity::set_for_current(*id);
-        }
+    if !core_affinity::set_for_current(core_affinity::CoreId { id: cpu }) {
+        core_affinity::set_for_current(core_affinity::CoreId { id: 0 });
     }
 }
 
