@@ -17,7 +17,6 @@ use core::marker::PhantomData;
 use core::mem::MaybeUninit;
 use core::ops::Deref;
 use core::ptr::NonNull;
-use core::sync::atomic::{AtomicU64, Ordering};
 
 use iceoryx2::service::internal::ServiceInternal;
 use iceoryx2_bb_elementary_traits::testing::abandonable::Abandonable;
@@ -73,14 +72,14 @@ struct Pool {
 
 thread_local! {
     static POOL: RefCell<Option<Pool>> = const { RefCell::new(None) };
+    static HEAP_FALLBACKS: Cell<u64> = const { Cell::new(0) };
 }
 
-static HEAP_FALLBACKS: AtomicU64 = AtomicU64::new(0);
-
-/// Number of [`PooledRc`]s that went to the heap (too large for a slot, or the pool was
-/// exhausted or not available). Large port states at set-up land here by design.
+/// Number of [`PooledRc`]s this thread put on the heap (too large for a slot, or the pool was
+/// exhausted or not available). Large port states at set-up land here by design; on a real-time
+/// thread the count must not grow after set-up.
 pub fn heap_fallbacks() -> u64 {
-    HEAP_FALLBACKS.load(Ordering::Relaxed)
+    HEAP_FALLBACKS.with(Cell::get)
 }
 
 fn new_pool() -> Pool {
@@ -241,7 +240,7 @@ impl<T: Send + Debug + Abandonable> ArcSyncPolicy<T> for PooledRc<T> {
                 p
             }
             None => {
-                HEAP_FALLBACKS.fetch_add(1, Ordering::Relaxed);
+                let _ = HEAP_FALLBACKS.try_with(|c| c.set(c.get() + 1));
                 let boxed = Box::new(Inner {
                     pooled: false,
                     ..inner

@@ -111,17 +111,56 @@ fn python_venv() -> Result<PathBuf> {
     Ok(python)
 }
 
+fn cargo(root: &Path, env: &[(String, String)], args: &[&str]) -> Result {
+    let t = Instant::now();
+    run(Command::new(env!("CARGO"))
+        .current_dir(root)
+        .args(args)
+        .envs(env.iter().map(|(k, v)| (k, v))))?;
+    eprintln!(
+        "xtask: `cargo {}` passed in {:.1} s",
+        args.join(" "),
+        t.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
 fn test() -> Result {
     let env = setup()?;
     let root = root();
-    let t = Instant::now();
-    run(Command::new(env!("CARGO"))
-        .current_dir(&root)
-        .args(["test", "--workspace", "--locked"])
-        .envs(env.iter().map(|(k, v)| (k, v))))?;
-    eprintln!(
-        "xtask: workspace tests passed in {:.1} s",
-        t.elapsed().as_secs_f64()
-    );
+    // The no_std crates must build for the firmware's target: proves no_std and no heap.
+    for features in [&[][..], &["--features", "score-core/f32"][..]] {
+        let mut args = vec!["build", "--locked", "--target", THUMB, "-p", "score-core"];
+        args.extend_from_slice(features);
+        cargo(&root, &env, &args)?;
+    }
+    cargo(
+        &root,
+        &env,
+        &[
+            "build",
+            "--locked",
+            "--target",
+            THUMB,
+            "-p",
+            "conductor-protocols",
+        ],
+    )?;
+    cargo(&root, &env, &["test", "--workspace", "--locked"])?;
+    // Score's algorithm tests again with its f32 number type.
+    cargo(
+        &root,
+        &env,
+        &[
+            "test",
+            "--locked",
+            "-p",
+            "score-core",
+            "-p",
+            "score-host",
+            "--features",
+            "score-host/f32",
+        ],
+    )?;
     Ok(())
 }
