@@ -1,0 +1,115 @@
+//! Client-side API over a real bus: State fed by a publisher, TickWaiter, nalgebra gather/scatter.
+
+use std::time::{Duration, Instant};
+
+use conductor_bus::{
+    Bus, CommandReceiver, Controller, Domain, Filter, Interpolation, State, StateMeta,
+    StatePublisher, StateSpec, TickWaiter,
+};
+
+fn owner(bus: &Bus, names: &[&str]) -> (StatePublisher, CommandReceiver) {
+    let specs: Vec<StateSpec> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            StateSpec::new(
+                *n,
+                StateMeta {
+                    index: i as u32,
+                    writable: true,
+                    rate_hz: 100.0,
+                    ..Default::default()
+                },
+            )
+        })
+        .collect();
+    (
+        StatePublisher::create(bus, "sys", &specs).unwrap(),
+        CommandReceiver::create(bus, "sys").unwrap(),
+    )
+}
+
+#[test]
+fn state_history_and_calculus_from_published_samples() {
+    let d = Domain::unique("state").unwrap();
+    let bus = Bus::open(&d, "t").unwrap();
+    let (mut p, _rx) = owner(&bus, &["x"]);
+    let mut x = State::new(&bus, "sys/x", 512)
+        .unwrap()
+        .with_filter(Filter::LowPass { cutoff_hz: 1.0 });
+    // sin(t) sampled at 100 Hz for 3 s, stamped with synthetic sample times.
+    let h = 0.01;
+    for k in 0..=300u64 {
+        let t = k as f64 * h;
+        p.publish(0, k, 1_000_000_000 + k * 10_000_000, t.sin(), 0)
+            .unwrap();
+        if k % 100 == 0 {
+            x.update().unwrap(); // drain periodically so the 256-deep queue never overflows
+        }
+    }
+    x.update().unwrap();
+    assert_eq!(x.history().len(), 301);
+    assert_eq!(x.subscriber().missed(), 0);
+    assert_eq!(x.value().unwrap(), 3.0f64.sin());
+    // Same bounds as the History unit tests (method order): cubic h⁴/24, derivative h²/3,
+    // trapezoid T·h²/12.
+    let v = x.at(-0.505, Interpolation::Cubic).unwrap();
+    assert!((v - (3.0f64 - 0.505).sin()).abs() < h.powi(4) / 24.0);
+    assert!((x.derivative().unwrap() - 3.0f64.cos()).abs() < h * h / 3.0);
+    assert!((x.integral() - (1.0 - 3.0f64.cos())).abs() < 3.0 * h * h / 12.0);
+    let f = x.filtered().unwrap();
+    assert!(
+        f.abs() < 1.0 && f != x.value().unwrap(),
+        "low-pass output {f}"
+    );
+    let s = x.spectrum(256).unwrap();
+    assert!((s.resolution_hz - 100.0 / 256.0).abs() < 1e-9);
+    assert!(x.age().unwrap() > 0.0);
+}
+
+#[test]
+fn tick_waiter_wakes_on_ticks_and_times_out_without() {
+    let d = Domain::unique("tick").unwrap();
+    let bus = Bus::open(&d, "t").unwrap();
+    let (mut p, _rx) = owner(&bus, &["x"]);
+    let mut w = TickWaiter::new(&bus, "sys").unwrap();
+    let t0 = Instant::now();
+    assert_eq!(w.wait(Duration::from_millis(50)).unwrap(), 0);
+    assert!(t0.elapsed() >= Duration::from_millis(45), "returned early");
+    p.notify_tick().unwrap();
+    p.notify_tick().unwrap();
+    assert!(w.wait(Duration::from_secs(5)).unwrap() >= 1);
+    assert_eq!(w.try_consume().unwrap(), 0, "notifications were consumed");
+    assert!(w.raw_fd() >= 0);
+}
+
+#[test]
+fn gather_and_scatter_move_vectors() {
+    let d = Domain::unique("vec").unwrap();
+    let bus = Bus::open(&d, "t").unwrap();
+    let (mut p, mut rx) = owner(&bus, &["a", "b", "c"]);
+    let mut ctl = Controller::new(&bus);
+    let names = ["sys/a", "sys/b", "sys/c"];
+    // Before the owner publishes anything there is no value to gather.
+    assert!(ctl.gather(&names).is_err());
+    for (i, v) in [1.5, -2.0, 0.25].into_iter().enumerate() {
+        p.publish(i, 1, 1_000, v, 0).unwrap();
+    }
+    let x = ctl.gather(&names).unwrap();
+    assert_eq!(x.as_slice(), [1.5, -2.0, 0.25]);
+    let xs = ctl.gather_static(&names).unwrap();
+    assert_eq!(xs, nalgebra::Vector3::new(1.5, -2.0, 0.25));
+    assert_eq!(ctl.scatter(&names, &[0.1, 0.2, 0.3]).unwrap(), 3);
+    let mut got = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while got.is_empty() && Instant::now() < deadline {
+        rx.drain(|f| got = f.setpoints().iter().map(|s| (s.index, s.value)).collect())
+            .unwrap();
+    }
+    assert_eq!(
+        got,
+        [(0, 0.1), (1, 0.2), (2, 0.3)],
+        "one frame with all three"
+    );
+    assert!(ctl.scatter(&names, &[1.0]).is_err());
+}
