@@ -114,6 +114,12 @@ fn parse_kv(s: &str) -> Result<(String, f64), String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // SIGTERM/SIGINT end the loops below normally, so every port is dropped and the domain's
+    // shared memory is released.
+    if let Err(e) = conductor_bus::shutdown::install() {
+        eprintln!("conductor-bus-peer: cannot install signal handlers: {e}");
+        return ExitCode::FAILURE;
+    }
     let domain = match cli.domain.as_deref() {
         Some(d) => Domain::new(d),
         None => Domain::from_env(),
@@ -131,6 +137,10 @@ fn main() -> ExitCode {
 }
 
 type Res = Result<(), String>;
+
+fn stop() -> bool {
+    conductor_bus::shutdown::requested()
+}
 
 fn run(domain: &Domain, cmd: Cmd) -> Res {
     let s = |e: conductor_bus::BusError| e.to_string();
@@ -180,7 +190,7 @@ fn run(domain: &Domain, cmd: Cmd) -> Res {
             let start = Instant::now();
             let t0 = monotonic_ns();
             let mut tick = 0u64;
-            while count == 0 || tick < count {
+            while (count == 0 || tick < count) && !stop() {
                 let deadline = start + period * tick as u32;
                 if let Some(d) = deadline.checked_duration_since(Instant::now()) {
                     sleep(d);
@@ -199,7 +209,9 @@ fn run(domain: &Domain, cmd: Cmd) -> Res {
                 publisher.notify_tick().map_err(s)?;
                 tick += 1;
             }
-            sleep(Duration::from_millis(linger_ms));
+            if !stop() {
+                sleep(Duration::from_millis(linger_ms));
+            }
             Ok(())
         }
         Cmd::Subscribe {
@@ -214,7 +226,7 @@ fn run(domain: &Domain, cmd: Cmd) -> Res {
             println!("READY");
             let deadline = Instant::now() + Duration::from_secs_f64(timeout);
             let mut last_seq = None;
-            while sub.received() + sub.missed() < count && Instant::now() < deadline {
+            while sub.received() + sub.missed() < count && Instant::now() < deadline && !stop() {
                 match sub.receive().map_err(s)? {
                     Some(sample) => {
                         last_seq = Some(sample.seq);
@@ -243,7 +255,7 @@ fn run(domain: &Domain, cmd: Cmd) -> Res {
             println!("READY");
             let deadline = Instant::now() + Duration::from_secs_f64(timeout);
             let mut got = 0;
-            while got < frames && Instant::now() < deadline {
+            while got < frames && Instant::now() < deadline && !stop() {
                 got += rx
                     .drain(|f| {
                         let body: Vec<String> = f
@@ -256,7 +268,7 @@ fn run(domain: &Domain, cmd: Cmd) -> Res {
                     .map_err(s)? as u64;
                 sleep(Duration::from_millis(1));
             }
-            if got < frames {
+            if got < frames && !stop() {
                 return Err(format!("timed out with {got} of {frames} frames"));
             }
             Ok(())

@@ -64,8 +64,21 @@ impl Peer {
 }
 
 impl Drop for Peer {
+    /// SIGTERM, so the peer drops its ports and releases the domain's shared memory; SIGKILL only
+    /// if it does not exit within 5 s.
     fn drop(&mut self) {
-        let _ = self.child.kill();
+        if let Ok(None) = self.child.try_wait() {
+            // SAFETY: kill(2) on our own child's pid has no memory-safety preconditions.
+            unsafe { libc::kill(self.child.id() as i32, libc::SIGTERM) };
+            let deadline = std::time::Instant::now() + Duration::from_secs(5);
+            while std::time::Instant::now() < deadline {
+                if let Ok(Some(_)) = self.child.try_wait() {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            let _ = self.child.kill();
+        }
         let _ = self.child.wait();
     }
 }
