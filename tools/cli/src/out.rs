@@ -34,9 +34,9 @@ pub fn flags(s: u32) -> String {
     }
 }
 
-/// `[min, max]`, with `-inf`/`inf` for unbounded sides.
+/// `[min,max]` (no space, so columns split on whitespace), with `-inf`/`inf` for unbounded sides.
 pub fn limits(min: f64, max: f64) -> String {
-    format!("[{min}, {max}]")
+    format!("[{min},{max}]")
 }
 
 /// Formats rows as left-aligned columns separated by two spaces; the first row is the header.
@@ -92,7 +92,7 @@ mod tests {
             flags(status::CLAMPED | status::SIMULATED),
             "clamped,simulated"
         );
-        assert_eq!(limits(f64::NEG_INFINITY, 1.5), "[-inf, 1.5]");
+        assert_eq!(limits(f64::NEG_INFINITY, 1.5), "[-inf,1.5]");
     }
 
     #[test]

@@ -86,6 +86,20 @@ pub fn series(rec: &Recording, patterns: &[String], path: &Path) -> Result<Vec<S
     Ok(out)
 }
 
+/// Distinct colours that read well on white (the "tab10" set of many plotting tools).
+const PALETTE: [(u8, u8, u8); 10] = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+    (188, 189, 34),
+    (23, 190, 207),
+];
+
 fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for (x, y) in series.iter().flat_map(|s| &s.points) {
@@ -132,7 +146,8 @@ where
         .draw()
         .map_err(e)?;
     for (i, s) in series.iter().enumerate() {
-        let color = Palette99::pick(i).to_rgba().stroke_width(2);
+        let (r, g, b) = PALETTE[i % PALETTE.len()];
+        let color = RGBColor(r, g, b).stroke_width(2);
         chart
             .draw_series(LineSeries::new(s.points.iter().copied(), color))
             .map_err(e)?
