@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 use std::io::{BufRead, BufReader};
+use std::path::Path;
 use std::path::PathBuf;
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::mpsc;
@@ -10,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use conductor_bus::{Domain, StateMeta, StateSpec};
 use conductor_examples::sim::{self, SimHandle, SimSpec};
+use serde_json::Value;
 
 pub fn workspace() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -130,7 +132,7 @@ impl Bg {
     }
 
     /// Sends SIGINT (to this child only) and waits; returns (success, stderr).
-    pub fn interrupt(mut self) -> (bool, String) {
+    pub fn interrupt(self) -> (bool, String) {
         // SAFETY: kill(2) on the pid of a child we spawned and have not reaped.
         unsafe { libc::kill(self.child.id() as i32, libc::SIGINT) };
         self.finish()
@@ -203,4 +205,28 @@ pub fn free_udp_ports(n: u16) -> u16 {
         }
     }
     panic!("no block of {n} free UDP ports");
+}
+
+/// Runs tests/python/check_mcap.py (official `mcap` reader + `jsonschema`) on a recording.
+pub fn check_with_python(file: &Path) -> Value {
+    let out = Command::new(python())
+        .arg(workspace().join("tools/cli/tests/python/check_mcap.py"))
+        .arg(file)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "check_mcap.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Three states of a leg at `rate`.
+pub fn leg(rate: f64) -> Vec<conductor_bus::StateSpec> {
+    vec![
+        state(0, "knee", "rad", true, -1.5, 2.0, rate, "dKnee"),
+        state(1, "hip", "rad", true, -1.0, 1.0, rate, "dHip"),
+        state(2, "current", "A", false, -5.0, 5.0, rate, ""),
+    ]
 }
