@@ -113,7 +113,7 @@ impl Bg {
     }
 
     /// Stdout lines up to and including the first that satisfies `pred`.
-    pub fn until(&self, timeout: Duration, pred: impl Fn(&str) -> bool) -> Vec<String> {
+    pub fn until(&mut self, timeout: Duration, pred: impl Fn(&str) -> bool) -> Vec<String> {
         let end = Instant::now() + timeout;
         let mut seen = Vec::new();
         while let Some(left) = end.checked_duration_since(Instant::now()) {
@@ -127,6 +127,14 @@ impl Bg {
                 }
                 Err(_) => break,
             }
+        }
+        if let Ok(Some(status)) = self.child.try_wait() {
+            let mut err = String::new();
+            use std::io::Read;
+            if let Some(mut e) = self.child.stderr.take() {
+                let _ = e.read_to_string(&mut err);
+            }
+            panic!("child exited ({status}) before the line; stdout {seen:?}; stderr: {err}");
         }
         panic!("timed out waiting for a line; got {seen:?}");
     }
@@ -194,9 +202,12 @@ pub fn tempdir(tag: &str) -> PathBuf {
 
 /// `n` consecutive free UDP ports on 127.0.0.1 (free when checked; the gateway binds them next).
 pub fn free_udp_ports(n: u16) -> u16 {
-    let seed = (std::process::id() as u16 % 997) * 23;
-    for k in 0..200u16 {
-        let base = 20000 + (seed + k * 97) % 40000;
+    // Different processes and different tests of one process start at different places.
+    static CALLS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let seed = std::process::id() % 997 * 23 + call * 401;
+    for k in 0..200u32 {
+        let base = (20000 + (seed + k * 97) % 40000) as u16;
         let socks: Vec<_> = (0..n)
             .map_while(|i| std::net::UdpSocket::bind(("127.0.0.1", base + i)).ok())
             .collect();
