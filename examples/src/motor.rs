@@ -91,7 +91,7 @@ mod tests {
             m.step(1e-3, &mut v);
         }
         let (g, tau, u, t) = (m.gain, m.tau, 3.0, 1.0);
-        let e = (-t / tau as f64).exp();
+        let e = (-t / tau).exp();
         // Exact per step; only rounding accumulates over 1000 steps.
         assert!((v[VELOCITY] - g * u * (1.0 - e)).abs() < 1e-9);
         assert!((v[POSITION] - g * u * (t - tau * (1.0 - e))).abs() < 1e-9);

@@ -169,7 +169,7 @@ pub fn run(
         }
         publisher.notify_tick()?;
         tick += 1;
-        if tick % stats_every == 0 {
+        if tick.is_multiple_of(stats_every) {
             let (t0, n0) = interval;
             let secs = t0.elapsed().as_secs_f64();
             if secs > 0.0 {

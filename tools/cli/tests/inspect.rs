@@ -9,18 +9,17 @@ use support::*;
 
 fn leg_states(rate: f64) -> Vec<conductor_bus::StateSpec> {
     vec![
-        state(0, "knee", "rad", true, -1.5, 2.0, rate, "dKnee"),
+        state(0, "knee", "rad", true, (-1.5, 2.0), rate, "dKnee"),
         state(
             1,
             "hip",
             "rad",
             true,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
+            (f64::NEG_INFINITY, f64::INFINITY),
             rate,
             "dHip",
         ),
-        state(2, "current", "A", false, -5.0, 5.0, rate, ""),
+        state(2, "current", "A", false, (-5.0, 5.0), rate, ""),
     ]
 }
 
@@ -32,7 +31,7 @@ fn list_shows_every_state_with_metadata() {
         &d,
         "arm",
         50.0,
-        vec![state(0, "grip", "", true, 0.0, 1.0, 50.0, "")],
+        vec![state(0, "grip", "", true, (0.0, 1.0), 50.0, "")],
     );
     let out = ok(conductor(&d).arg("list"));
     let rows: Vec<Vec<&str>> = out
@@ -227,7 +226,7 @@ fn top_prints_the_stats_service_figures() {
     let (tx, rx) = std::sync::mpsc::channel();
     let fake = std::thread::spawn(move || {
         let bus = Bus::open(&dom, "executor/arm").unwrap();
-        let specs = vec![state(0, "elbow", "rad", true, -1.0, 1.0, 1000.0, "")];
+        let specs = vec![state(0, "elbow", "rad", true, (-1.0, 1.0), 1000.0, "")];
         let mut states = StatePublisher::create(&bus, "arm", &specs).unwrap();
         let mut stats = StatsPublisher::create(&bus, "arm").unwrap();
         tx.send(()).unwrap();
@@ -265,7 +264,7 @@ fn top_prints_the_stats_service_figures() {
         &d,
         "motor",
         500.0,
-        vec![state(0, "u", "V", true, -1.0, 1.0, 500.0, "")],
+        vec![state(0, "u", "V", true, (-1.0, 1.0), 500.0, "")],
     );
 
     let out = ok(conductor(&d).args(["top", "--once"]));

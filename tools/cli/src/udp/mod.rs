@@ -274,11 +274,11 @@ pub fn run(bus: &Bus, args: &UdpArgs) -> Result<GatewayReport> {
             }
             return Err(CliError::os("poll", e));
         }
-        for i in 0..fds.len() {
-            if fds[i].revents == 0 {
+        for (i, fd) in fds.iter_mut().enumerate() {
+            if fd.revents == 0 {
                 continue;
             }
-            fds[i].revents = 0;
+            fd.revents = 0;
             loop {
                 match gw.ports[i].socket.recv_from(&mut buf) {
                     Ok((len, from)) => gw.handle(i, from, &buf[..len])?,

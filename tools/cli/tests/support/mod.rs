@@ -53,8 +53,7 @@ pub fn state(
     name: &str,
     units: &str,
     writable: bool,
-    min: f64,
-    max: f64,
+    (min, max): (f64, f64),
     rate: f64,
     device: &str,
 ) -> StateSpec {
@@ -236,8 +235,8 @@ pub fn check_with_python(file: &Path) -> Value {
 /// Three states of a leg at `rate`.
 pub fn leg(rate: f64) -> Vec<conductor_bus::StateSpec> {
     vec![
-        state(0, "knee", "rad", true, -1.5, 2.0, rate, "dKnee"),
-        state(1, "hip", "rad", true, -1.0, 1.0, rate, "dHip"),
-        state(2, "current", "A", false, -5.0, 5.0, rate, ""),
+        state(0, "knee", "rad", true, (-1.5, 2.0), rate, "dKnee"),
+        state(1, "hip", "rad", true, (-1.0, 1.0), rate, "dHip"),
+        state(2, "current", "A", false, (-5.0, 5.0), rate, ""),
     ]
 }
