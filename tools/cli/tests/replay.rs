@@ -179,3 +179,149 @@ fn replay_exited(bg: &Bg) -> bool {
     let stat = std::fs::read_to_string(format!("/proc/{}/stat", bg.child.id())).unwrap_or_default();
     stat.split_whitespace().nth(2).is_none_or(|s| s == "Z")
 }
+
+/// A small recording written directly with the mcap crate in the documented layout: one state
+/// `arm/elbow` whose value is the sample number, `n` samples at 100 Hz.
+fn synthetic(path: &Path, n: u64) {
+    use conductor_cli::recording as r;
+    let f = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut w = mcap::Writer::new(f).unwrap();
+    let schema = w
+        .add_schema(r::SCHEMA_NAME, r::SCHEMA_ENCODING, r::SCHEMA.as_bytes())
+        .unwrap();
+    let md: BTreeMap<String, String> = [
+        ("subsystem", "arm"),
+        ("state", "elbow"),
+        ("index", "4"),
+        ("units", "rad"),
+        ("writable", "true"),
+        ("rate_hz", "100"),
+        ("min", "-3"),
+        ("max", "3"),
+        ("device", "d1"),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_string(), v.to_string()))
+    .collect();
+    let ch = w
+        .add_channel(schema, "/arm/elbow", r::MESSAGE_ENCODING, &md)
+        .unwrap();
+    for i in 0..n {
+        let t = 1_000_000_000 + i * 10_000_000;
+        let body = serde_json::json!({"value": i as f64, "status": 0, "t_sample": t as f64 * 1e-9, "seq": i, "tick": i});
+        w.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: i as u32,
+                log_time: t,
+                publish_time: t,
+            },
+            body.to_string().as_bytes(),
+        )
+        .unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn replay_loops_until_interrupted() {
+    let dir = tempdir("loop");
+    let file = dir.join("elbow.mcap");
+    synthetic(&file, 20);
+    let d = Domain::unique("loop").unwrap();
+    let mut cmd = conductor(&d);
+    cmd.args([
+        "replay",
+        "--loop",
+        "--wait-subscribers",
+        "1",
+        "--no-progress",
+    ])
+    .arg(&file);
+    let replay = Bg::spawn(&mut cmd);
+    let bus = Bus::open(&d, "test-subscriber").unwrap();
+    let end = Instant::now() + Duration::from_secs(10);
+    let mut sub = loop {
+        match StateSubscriber::with_buffer(&bus, "arm/elbow", 256) {
+            Ok(s) => break s,
+            Err(e) => {
+                assert!(Instant::now() < end, "{e}");
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
+    };
+    // Index renumbered from 0, read-only; the rest of the metadata as recorded.
+    let m = &sub.info().meta;
+    assert_eq!(
+        (m.index, m.writable, m.units.as_str(), m.rate_hz),
+        (0, false, "rad", 100.0)
+    );
+    let mut values = Vec::new();
+    while values.len() < 50 {
+        assert!(Instant::now() < end, "only {values:?}");
+        sub.drain(|s| values.push(s.value)).unwrap();
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let (success, stderr) = replay.interrupt();
+    assert!(success, "{stderr}");
+    // 0..19, 0..19, ...: at least two passes finished before the interrupt.
+    let want: Vec<f64> = (0..values.len()).map(|i| (i % 20) as f64).collect();
+    assert_eq!(values, want);
+    let passes: u64 = stderr
+        .split("sample(s) in ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{stderr}"));
+    assert!(passes >= 2, "{stderr}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn replay_and_plot_refuse_files_that_are_not_conductor_recordings() {
+    let dir = tempdir("foreign");
+    let d = Domain::unique("foreign").unwrap();
+    // Not MCAP at all.
+    let junk = dir.join("junk.mcap");
+    std::fs::write(&junk, b"definitely not an mcap file").unwrap();
+    let err = fails(conductor(&d).arg("replay").arg(&junk));
+    assert!(err.contains("junk.mcap: MCAP:"), "{err}");
+    // MCAP, but a foreign channel.
+    let foreign = dir.join("foreign.mcap");
+    let mut w = mcap::Writer::new(std::io::BufWriter::new(
+        std::fs::File::create(&foreign).unwrap(),
+    ))
+    .unwrap();
+    let ch = w
+        .add_channel(0, "/camera", "cdr", &BTreeMap::new())
+        .unwrap();
+    w.write_to_known_channel(
+        &mcap::records::MessageHeader {
+            channel_id: ch,
+            sequence: 0,
+            log_time: 1,
+            publish_time: 1,
+        },
+        b"\x00\x01",
+    )
+    .unwrap();
+    w.finish().unwrap();
+    drop(w);
+    let err = fails(conductor(&d).arg("replay").arg(&foreign));
+    assert!(
+        err.contains("\"/camera\" is not a Conductor state channel"),
+        "{err}"
+    );
+    let err = fails(
+        conductor(&d)
+            .arg("plot")
+            .arg(&foreign)
+            .args(["*", "-o"])
+            .arg(dir.join("x.png")),
+    );
+    assert!(err.contains("not a Conductor state channel"), "{err}");
+    // A missing file names the file.
+    let err = fails(conductor(&d).args(["replay", "/nonexistent/run.mcap"]));
+    assert!(err.contains("/nonexistent/run.mcap: No such file"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
