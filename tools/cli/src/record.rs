@@ -178,8 +178,8 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
         if let Some(b) = &bar {
             if now - last_draw > Duration::from_millis(100) {
                 last_draw = now;
-                b.set_position((now - start).as_millis() as u64);
                 b.set_message(format!("{messages} messages"));
+                b.set_position((now - start).as_millis() as u64);
             }
         }
         std::thread::sleep(Duration::from_millis(1));
