@@ -122,7 +122,21 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
     // One pass lasts the recording's span plus one mean sample period, so that a loop's first
     // sample does not land on the previous pass's last.
     let per_channel = (rec.samples.len() / states.max(1)).max(2) as u64;
-    let pass_ns = (t_last - t_first) + (t_last - t_first) / (per_channel - 1);
+    let mut pass_ns = (t_last - t_first) + (t_last - t_first) / (per_channel - 1);
+    if pass_ns == 0 {
+        // One instant only (e.g. a single sample): repeat it at the fastest recorded rate.
+        let rate = rec
+            .channels
+            .iter()
+            .map(|c| c.meta.rate_hz)
+            .fold(0.0, f64::max);
+        pass_ns = if rate > 0.0 {
+            (1e9 / rate) as u64
+        } else {
+            1_000_000
+        }
+        .max(1);
+    }
     let bar = (!args.no_progress && std::io::stderr().is_terminal()).then(|| {
         let b = ProgressBar::new(rec.samples.len() as u64);
         if let Ok(style) =
