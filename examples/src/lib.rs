@@ -1,0 +1,18 @@
+//! # conductor-examples
+//!
+//! External controllers for Conductor, written the way a user writes them, and the simulated
+//! plant they are tested against:
+//!
+//! * `pid-controller` — the thesis' Fig. 3.4 PID, fed by a State's derivative and integral;
+//! * `state-observer` — the thesis' Fig. 3.5 observer + state feedback, with nalgebra;
+//! * `python/controller.py` — the official iceoryx2 Python package and the ctypes mirror of
+//!   `bus/ABI.md`;
+//! * `python/udp_client.py` — a MATLAB-style client of `conductor udp-gateway`;
+//! * `sim-motor` — a first-order motor owned by a simulated executor ([`sim`], [`motor`]).
+//!
+//! See `examples/README.md` for how to run each.
+
+#![warn(missing_docs)]
+
+pub mod motor;
+pub mod sim;

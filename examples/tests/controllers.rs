@@ -1,0 +1,127 @@
+//! Every example controller closes its loop on the simulated motor, checked on the bus (not by
+//! the controller's own report).
+//!
+//! The bound used throughout: the loops place their closed-loop poles at −8 to −10 s⁻¹ for this
+//! motor (gain 2 rad/s/V, τ = 0.1 s), so after 3 s the transient of the 1 rad step is below
+//! 1e-6 rad; the plant integrates, so no steady offset can remain. 0.01 rad leaves room for the
+//! loop delays of a loaded machine, which slow the transient but do not stop it.
+
+use std::path::PathBuf;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use conductor_bus::{Bus, Domain, StateSubscriber};
+use conductor_examples::{motor, sim};
+
+fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn python() -> PathBuf {
+    let py = std::env::var_os("CONDUCTOR_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
+    assert!(
+        py.exists(),
+        "{} not found: run `cargo xtask setup` (the venv of tools/python-requirements.txt, with iceoryx2)",
+        py.display()
+    );
+    py
+}
+
+fn position(d: &Domain) -> f64 {
+    let bus = Bus::open(d, "check").unwrap();
+    let mut sub = StateSubscriber::new(&bus, "motor/position").unwrap();
+    let end = Instant::now() + Duration::from_secs(2);
+    loop {
+        if let Some(s) = sub.latest().unwrap() {
+            return s.value;
+        }
+        assert!(Instant::now() < end, "no position sample");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+fn run_json(cmd: &mut Command) -> serde_json::Value {
+    let out = cmd.output().expect("start the example");
+    assert!(
+        out.status.success(),
+        "{cmd:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!("{e}: {}", String::from_utf8_lossy(&out.stdout));
+    })
+}
+
+#[test]
+fn pid_controller_holds_the_motor_at_its_target() {
+    let d = Domain::unique("pid").unwrap();
+    let _sim = sim::spawn(&d, motor::spec(500.0), motor::Motor::default()).unwrap();
+    let r = run_json(Command::new(env!("CARGO_BIN_EXE_pid-controller")).args([
+        "--domain",
+        d.name(),
+        "--target",
+        "1",
+        "--seconds",
+        "3",
+    ]));
+    assert!(r["frames"].as_u64().unwrap() > 100, "{r}");
+    let theta = position(&d);
+    assert!((theta - 1.0).abs() < 0.01, "position {theta}; {r}");
+}
+
+#[test]
+fn state_observer_estimates_velocity_and_holds_the_target() {
+    let d = Domain::unique("observer").unwrap();
+    let _sim = sim::spawn(&d, motor::spec(500.0), motor::Motor::default()).unwrap();
+    let r = run_json(Command::new(env!("CARGO_BIN_EXE_state-observer")).args([
+        "--domain",
+        d.name(),
+        "--target",
+        "1",
+        "--seconds",
+        "3",
+    ]));
+    let theta = position(&d);
+    assert!((theta - 1.0).abs() < 0.01, "position {theta}; {r}");
+    // The observer's model is the simulator's exact discretisation, so the velocity estimate is
+    // exact but for ticks where a read races the next publish (a one-step error that decays at
+    // the observer poles): 5 % of the peak velocity is a generous bound for that.
+    let rms = r["velocity_rms_error"].as_f64().unwrap();
+    let peak = r["peak_velocity"].as_f64().unwrap();
+    assert!(peak > 1.0, "the motor moved: {r}");
+    assert!(rms < 0.05 * peak, "{r}");
+}
+
+#[test]
+fn python_controller_closes_the_loop_through_iceoryx2() {
+    let d = Domain::unique("pyctl").unwrap();
+    let _sim = sim::spawn(&d, motor::spec(500.0), motor::Motor::default()).unwrap();
+    let r = run_json(
+        Command::new(python())
+            .arg(workspace().join("examples/python/controller.py"))
+            .args(["--domain", d.name(), "--target", "1", "--seconds", "3"]),
+    );
+    assert!(r["frames"].as_u64().unwrap() > 100, "{r}");
+    let theta = position(&d);
+    assert!((theta - 1.0).abs() < 0.01, "position {theta}; {r}");
+}
+
+#[test]
+fn the_python_abi_module_is_the_one_documented_in_bus_abi_md() {
+    let doc = std::fs::read_to_string(workspace().join("bus/ABI.md")).unwrap();
+    let block = doc
+        .split("<!-- conductor_abi.py -->")
+        .nth(1)
+        .and_then(|after| after.split("```python\n").nth(1))
+        .and_then(|body| body.split("\n```").next())
+        .expect("the ctypes block in bus/ABI.md");
+    let ours =
+        std::fs::read_to_string(workspace().join("examples/python/conductor_abi.py")).unwrap();
+    assert_eq!(
+        ours.trim_end(),
+        block.trim_end(),
+        "examples/python/conductor_abi.py must be a verbatim copy of the block in bus/ABI.md"
+    );
+}

@@ -1,0 +1,267 @@
+//! The command-line grammar (clap derive). Every subcommand's options live here, so `--help`,
+//! the shell completions and the README describe one thing.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+
+const EXAMPLES: &str = "\
+Examples:
+  conductor list                                  every state of the domain with its metadata
+  conductor get leg/knee                          latest sample of one state
+  conductor set leg/knee 0.5                      send a setpoint (refused outside the limits)
+  conductor echo 'leg/*' --rate 10                print a subsystem's states, 10 lines/s each
+  conductor top                                   executor health, refreshed every second
+  conductor record '*' -o run.mcap --duration 30  record every state to MCAP (open in Foxglove)
+  conductor replay run.mcap --domain replay       publish a recording as live states
+  conductor udp-gateway --base-port 2827          plain-text SET/GET/SMP per state (thesis §2.5.2)
+  conductor plot run.mcap 'leg/*' -o leg.png      joint plot of recorded states
+  conductor completions bash > /etc/bash_completion.d/conductor
+
+The domain comes from --domain, else $CONDUCTOR_DOMAIN, else \"default\".
+State names are `subsystem/state`, or a bare state name when it is unique in the domain.
+Patterns are globs (`*`, `?`, `[..]`) over `subsystem/state` (or over the state name when the
+pattern has no `/`).";
+
+/// `conductor`: inspect, command, record and replay the states of a Conductor robot.
+#[derive(Debug, Parser)]
+#[command(name = "conductor", version, about, after_help = EXAMPLES)]
+pub struct Cli {
+    /// Domain to work in (like ROS_DOMAIN_ID) [default: $CONDUCTOR_DOMAIN or "default"].
+    #[arg(long, global = true, value_name = "NAME")]
+    pub domain: Option<String>,
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// List every state: units, rate, writable, limits, device, writer process, age.
+    #[command(after_help = "Example:\n  conductor list 'leg/*'")]
+    List(ListArgs),
+    /// Print the latest sample of one state.
+    #[command(after_help = "Examples:\n  conductor get leg/knee\n  conductor get knee --raw")]
+    Get(GetArgs),
+    /// Send one setpoint to a writable state, through a command frame.
+    #[command(
+        allow_negative_numbers = true,
+        after_help = "Values outside the state's limits are refused unless --clamp is given,
+then they are clamped to the nearest limit before sending. NaN and inf are always refused.
+
+Examples:\n  conductor set leg/knee 0.5\n  conductor set leg/knee -3 --clamp"
+    )]
+    Set(SetArgs),
+    /// Print samples of the states matching a name or glob, optionally rate-limited.
+    #[command(
+        after_help = "Examples:\n  conductor echo leg/knee\n  conductor echo 'leg/*' --rate 5 --count 50"
+    )]
+    Echo(EchoArgs),
+    /// Executor health per subsystem: achieved rate, lateness, misses, bus errors, stale states.
+    #[command(after_help = "Examples:\n  conductor top\n  conductor top --once")]
+    Top(TopArgs),
+    /// Record states to an MCAP file (one channel per state, JSON, zstd chunks, indexed).
+    #[command(
+        after_help = "Ctrl-C (SIGINT) or SIGTERM stops the recording and finalises the file.
+
+Examples:\n  conductor record '*' -o run.mcap\n  conductor record 'leg/*' -o walk.mcap --duration 30 --manifest robot.toml"
+    )]
+    Record(RecordArgs),
+    /// Publish a recording as live states (flagged REPLAYED), at its own pace or scaled.
+    #[command(
+        after_help = "Replayed states are read-only and indexed in recording order; replay
+into another domain than the robot's (the names would clash).
+
+Examples:\n  conductor --domain replay replay run.mcap\n  conductor --domain replay replay run.mcap --rate-scale 0.5 --loop"
+    )]
+    Replay(ReplayArgs),
+    /// Serve each state on its own UDP port: plain-text `SET <v>`, `GET`, `SMP`, `INFO`.
+    #[command(
+        name = "udp-gateway",
+        after_help = "Port of the i-th selected state (in `conductor list` order) = base port + i.
+Replies: `SET v` -> `OK <sent>` or `OK <sent> CLAMPED`; `GET` -> `<value>`;
+`SMP` -> `<value> <t_sample_ns> <seq> <status>` of the next fresh sample;
+`INFO` -> `<state> <units|-> <rw|ro> <min> <max> <rate_hz>`; anything else -> `ERR <reason>`.
+
+Examples:\n  conductor udp-gateway\n  conductor udp-gateway 'leg/*' --base-port 4000 --bind 0.0.0.0"
+    )]
+    UdpGateway(UdpArgs),
+    /// Plot recorded states against time into a PNG (or SVG) image.
+    #[command(
+        after_help = "Example:\n  conductor plot run.mcap 'leg/*' -o leg.png --title 'Robot Joint State'"
+    )]
+    Plot(PlotArgs),
+    /// Print a shell completion script.
+    #[command(after_help = "Example:\n  conductor completions zsh > ~/.zfunc/_conductor")]
+    Completions {
+        /// Shell to generate for.
+        shell: clap_complete::Shell,
+    },
+}
+
+/// `conductor list`.
+#[derive(Debug, Args)]
+pub struct ListArgs {
+    /// Only states matching this glob.
+    pub pattern: Option<String>,
+    /// How long to wait for each state's latest sample, for the AGE column (seconds).
+    #[arg(long, default_value_t = 0.3, value_name = "S")]
+    pub wait: f64,
+}
+
+/// `conductor get`.
+#[derive(Debug, Args)]
+pub struct GetArgs {
+    /// `subsystem/state` or a unique state name.
+    pub state: String,
+    /// Print only the value (shortest decimal that reads back exactly).
+    #[arg(long)]
+    pub raw: bool,
+    /// Give up when no sample arrives within this many seconds.
+    #[arg(long, default_value_t = 2.0, value_name = "S")]
+    pub timeout: f64,
+}
+
+/// `conductor set`.
+#[derive(Debug, Args)]
+pub struct SetArgs {
+    /// `subsystem/state` or a unique state name.
+    pub state: String,
+    /// The setpoint, in the state's units.
+    pub value: f64,
+    /// Clamp an out-of-limit value to the nearest limit instead of refusing it.
+    #[arg(long)]
+    pub clamp: bool,
+    /// How long to wait for the state's first sample after the frame (seconds; 0 = don't).
+    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    pub wait: f64,
+}
+
+/// `conductor echo`.
+#[derive(Debug, Args)]
+pub struct EchoArgs {
+    /// A state name or a glob.
+    pub pattern: String,
+    /// At most this many lines per second per state (by sample time); default: every sample.
+    #[arg(long, value_name = "HZ")]
+    pub rate: Option<f64>,
+    /// Stop after this many lines.
+    #[arg(long, value_name = "N")]
+    pub count: Option<u64>,
+    /// Stop after this many seconds.
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    /// One JSON object per line instead of columns.
+    #[arg(long)]
+    pub json: bool,
+    /// Wait this long for a matching state to appear (seconds).
+    #[arg(long, default_value_t = 5.0, value_name = "S")]
+    pub wait: f64,
+}
+
+/// `conductor top`.
+#[derive(Debug, Args)]
+pub struct TopArgs {
+    /// Seconds between refreshes.
+    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    pub interval: f64,
+    /// Print this many tables, then exit.
+    #[arg(long, value_name = "N", conflicts_with = "once")]
+    pub count: Option<u64>,
+    /// Print one table and exit (same as --count 1).
+    #[arg(long)]
+    pub once: bool,
+    /// How long to wait for the first stats of each executor (seconds).
+    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    pub wait: f64,
+}
+
+/// `conductor record`.
+#[derive(Debug, Args)]
+pub struct RecordArgs {
+    /// States to record: a name or a glob (`'*'` for all).
+    pub pattern: String,
+    /// Output MCAP file.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    /// Stop after this many seconds (default: until Ctrl-C).
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    /// Manifest to store in the file's metadata.
+    #[arg(long, value_name = "FILE")]
+    pub manifest: Option<PathBuf>,
+    /// Wait this long for a matching state to appear (seconds).
+    #[arg(long, default_value_t = 5.0, value_name = "S")]
+    pub wait: f64,
+    /// Never draw a progress bar (it is drawn only when stderr is a terminal anyway).
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+/// `conductor replay`.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// MCAP file written by `conductor record`.
+    pub file: PathBuf,
+    /// Playback speed: 2 = twice as fast, 0.5 = half speed.
+    #[arg(long, default_value_t = 1.0, value_name = "X")]
+    pub rate_scale: f64,
+    /// Start over at the end, until Ctrl-C.
+    #[arg(long = "loop")]
+    pub repeat: bool,
+    /// Only states matching this glob.
+    #[arg(long, value_name = "GLOB")]
+    pub states: Option<String>,
+    /// Before the first sample, wait (up to 10 s) until every replayed state has this many
+    /// subscribers.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub wait_subscribers: usize,
+    /// Never draw a progress bar.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+/// `conductor udp-gateway`.
+#[derive(Debug, Args)]
+pub struct UdpArgs {
+    /// States to serve (glob; default all).
+    pub pattern: Option<String>,
+    /// Port of the first state; state i (in `conductor list` order) gets base + i.
+    #[arg(long, default_value_t = 2827, value_name = "PORT")]
+    pub base_port: u16,
+    /// Address to bind; anything other than loopback exposes the robot to the network.
+    #[arg(long, default_value = "127.0.0.1", value_name = "ADDR")]
+    pub bind: std::net::IpAddr,
+    /// Longest wait for a fresh sample when answering SMP (seconds).
+    #[arg(long, default_value_t = 1.0, value_name = "S")]
+    pub smp_timeout: f64,
+    /// Wait this long for a matching state to appear (seconds).
+    #[arg(long, default_value_t = 5.0, value_name = "S")]
+    pub wait: f64,
+}
+
+/// `conductor plot`.
+#[derive(Debug, Args)]
+pub struct PlotArgs {
+    /// MCAP file written by `conductor record`.
+    pub file: PathBuf,
+    /// States to plot (names or globs).
+    #[arg(required = true)]
+    pub states: Vec<String>,
+    /// Output image: `.png` or `.svg`.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: PathBuf,
+    /// Plot title (default: the file name).
+    #[arg(long)]
+    pub title: Option<String>,
+    /// Y-axis label (default: the states' common units).
+    #[arg(long)]
+    pub ylabel: Option<String>,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 1200)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 700)]
+    pub height: u32,
+}

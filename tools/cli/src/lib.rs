@@ -1,0 +1,81 @@
+//! # conductor-cli
+//!
+//! The `conductor` command line. Each subcommand is a module with a `run` function taking the
+//! parsed arguments (see [`cli`]) and a [`Bus`](conductor_bus::Bus) on the chosen domain:
+//!
+//! * inspection: [`list`], [`get_set`] (`get`, `set`), [`echo`], [`top`];
+//! * logging: [`record`] and [`replay`] over the MCAP layout in [`recording`], and [`plot`];
+//! * the thesis' external interface: [`udp`] (`udp-gateway`).
+//!
+//! Long-running commands stop cleanly on Ctrl-C/SIGTERM ([`stop`]).
+
+#![warn(missing_docs)]
+
+pub mod cli;
+pub mod echo;
+pub mod error;
+pub mod get_set;
+pub mod list;
+pub mod out;
+pub mod plot;
+mod probe;
+pub mod record;
+pub mod recording;
+pub mod replay;
+pub mod select;
+pub mod stop;
+pub mod top;
+pub mod udp;
+
+use clap::CommandFactory;
+use conductor_bus::{Bus, Domain};
+
+use cli::{Cli, Command};
+pub use error::{CliError, Result};
+
+/// The domain named by `--domain`, else `CONDUCTOR_DOMAIN`, else `default`.
+pub fn domain(flag: Option<&str>) -> Result<Domain> {
+    Ok(match flag {
+        Some(d) => Domain::new(d)?,
+        None => Domain::from_env()?,
+    })
+}
+
+/// Runs one parsed command line.
+pub fn run(cli: Cli) -> Result<()> {
+    let bus = |what: &str| -> Result<Bus> {
+        let d = domain(cli.domain.as_deref())?;
+        Ok(Bus::open(&d, &format!("conductor-cli/{what}"))?)
+    };
+    match &cli.command {
+        Command::List(a) => list::run(&bus("list")?, a).map(drop),
+        Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
+        Command::Set(a) => get_set::set(&bus("set")?, a),
+        Command::Echo(a) => {
+            stop::install();
+            echo::run(&bus("echo")?, a).map(drop)
+        }
+        Command::Top(a) => {
+            stop::install();
+            top::run(&bus("top")?, a).map(drop)
+        }
+        Command::Record(a) => {
+            stop::install();
+            record::run(&bus("record")?, a).map(drop)
+        }
+        Command::Replay(a) => {
+            stop::install();
+            replay::run(&bus("replay")?, a).map(drop)
+        }
+        Command::UdpGateway(a) => {
+            stop::install();
+            udp::run(&bus("udp-gateway")?, a).map(drop)
+        }
+        Command::Plot(a) => plot::run(a).map(drop),
+        Command::Completions { shell } => {
+            let mut cmd = Cli::command();
+            clap_complete::generate(*shell, &mut cmd, "conductor", &mut std::io::stdout());
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,81 @@
+//! `conductor list`: every state with its metadata, writer and the age of its latest sample.
+
+use std::time::{Duration, Instant};
+
+use conductor_bus::{monotonic_ns, Bus};
+
+use crate::cli::ListArgs;
+use crate::error::Result;
+use crate::out;
+use crate::probe::Probe;
+use crate::select;
+
+/// Prints the table; returns the number of states listed.
+pub fn run(bus: &Bus, args: &ListArgs) -> Result<usize> {
+    let states = select::states(bus, args.pattern.as_deref().unwrap_or("*"))?;
+    if states.is_empty() {
+        eprintln!(
+            "no states in domain {:?}{}",
+            bus.domain().name(),
+            args.pattern
+                .as_ref()
+                .map_or(String::new(), |p| format!(" matching {p:?}"))
+        );
+        return Ok(0);
+    }
+    let probe = Probe::new(bus.domain())?;
+    // A service that vanished between listing and opening is shown without writer and age.
+    let mut probed: Vec<_> = states.iter().map(|s| probe.open(s).ok()).collect();
+    // New subscribers get the newest sample with the publisher's next send: wait at most
+    // `--wait` for all of them.
+    let deadline = Instant::now() + Duration::from_secs_f64(args.wait.max(0.0));
+    loop {
+        let mut all = true;
+        for p in probed.iter_mut().flatten() {
+            all &= p.poll()?;
+        }
+        if all || Instant::now() >= deadline {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    let names = probe.node_names()?;
+    let now = monotonic_ns();
+    let mut rows = vec![[
+        "STATE", "UNITS", "RATE_HZ", "RW", "LIMITS", "DEVICE", "WRITER", "VALUE", "AGE",
+    ]
+    .map(String::from)
+    .to_vec()];
+    for (s, p) in states.iter().zip(&probed) {
+        let m = &s.meta;
+        let writers = p
+            .as_ref()
+            .map(|p| p.writers(&names).join(","))
+            .filter(|w| !w.is_empty())
+            .unwrap_or_else(|| "-".into());
+        let latest = p.as_ref().and_then(|p| p.latest());
+        rows.push(vec![
+            s.qualified_name(),
+            if m.units.is_empty() {
+                "-".into()
+            } else {
+                m.units.clone()
+            },
+            out::value(m.rate_hz),
+            if m.writable { "rw" } else { "ro" }.into(),
+            out::limits(m.min, m.max),
+            if m.device.is_empty() {
+                "-".into()
+            } else {
+                m.device.clone()
+            },
+            writers,
+            latest.map_or("-".into(), |l| out::value(l.value)),
+            latest.map_or("-".into(), |l| {
+                out::age(now.saturating_sub(l.t_sample_ns) as f64 * 1e-9)
+            }),
+        ]);
+    }
+    print!("{}", out::table(&rows));
+    Ok(states.len())
+}

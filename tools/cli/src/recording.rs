@@ -1,0 +1,301 @@
+//! The MCAP layout of a Conductor recording, shared by `record`, `replay` and `plot`.
+//!
+//! * profile `conductor`; chunked (zstd), with message, chunk and metadata indexes;
+//! * one schema, `conductor.StateSample`, encoding `jsonschema` ([`SCHEMA`]);
+//! * one channel per state, topic `/<subsystem>/<state>`, message encoding `json`, channel
+//!   metadata = the state's bus metadata ([`channel_metadata`]);
+//! * one message per sample: `log_time` = `t_sample_ns`, `publish_time` = `t_publish_ns`
+//!   (CLOCK_MONOTONIC), `sequence` = the sample's `seq` (low 32 bits), body [`Message`];
+//! * metadata records `conductor` (at start), `conductor.manifest` (when given) and
+//!   `conductor.summary` (at the end).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use conductor_bus::{StateInfo, StateMeta, StateSample};
+use serde::{Deserialize, Serialize};
+
+use crate::error::{CliError, Result};
+
+/// MCAP profile of the files.
+pub const PROFILE: &str = "conductor";
+/// Name of the schema record.
+pub const SCHEMA_NAME: &str = "conductor.StateSample";
+/// Encoding of the schema record.
+pub const SCHEMA_ENCODING: &str = "jsonschema";
+/// Encoding of every channel.
+pub const MESSAGE_ENCODING: &str = "json";
+/// Name of the metadata record written at the start.
+pub const META_START: &str = "conductor";
+/// Name of the metadata record holding the manifest.
+pub const META_MANIFEST: &str = "conductor.manifest";
+/// Name of the metadata record written when the recording ends.
+pub const META_SUMMARY: &str = "conductor.summary";
+
+/// The JSON Schema (draft 2020-12) of every message.
+pub const SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "conductor.StateSample",
+  "description": "One sample of a Conductor state (bus ABI v1, StateSample).",
+  "type": "object",
+  "properties": {
+    "value": {
+      "type": ["number", "null"],
+      "description": "Value in the state's units (channel metadata 'units'); null encodes NaN or infinity."
+    },
+    "status": {
+      "type": "integer",
+      "minimum": 0,
+      "maximum": 4294967295,
+      "description": "Status flags: 1 stale, 2 clamped, 4 rejected, 8 watchdog, 16 device-fault, 32 replayed, 64 simulated."
+    },
+    "t_sample": {
+      "type": "number",
+      "description": "Sample time, CLOCK_MONOTONIC seconds (the message log_time, in ns)."
+    },
+    "seq": {
+      "type": "integer",
+      "minimum": 0,
+      "description": "Per-state sample counter; a gap means samples were lost."
+    },
+    "tick": {
+      "type": "integer",
+      "minimum": 0,
+      "description": "Executor tick that produced the sample."
+    }
+  },
+  "required": ["value", "status", "t_sample", "seq", "tick"],
+  "additionalProperties": false
+}"#;
+
+/// The body of one message.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Message {
+    /// Value; `None` for NaN/inf (JSON has no such numbers).
+    pub value: Option<f64>,
+    /// Status flags.
+    pub status: u32,
+    /// Sample time (s).
+    pub t_sample: f64,
+    /// Sample counter.
+    pub seq: u64,
+    /// Executor tick.
+    pub tick: u64,
+}
+
+impl Message {
+    /// The message of a bus sample.
+    pub fn of(s: &StateSample) -> Self {
+        Self {
+            value: s.value.is_finite().then_some(s.value),
+            status: s.status,
+            t_sample: s.t_sample_ns as f64 * 1e-9,
+            seq: s.seq,
+            tick: s.tick,
+        }
+    }
+
+    /// The value, NaN for `null`.
+    pub fn value_or_nan(&self) -> f64 {
+        self.value.unwrap_or(f64::NAN)
+    }
+}
+
+/// `/<subsystem>/<state>`.
+pub fn topic(subsystem: &str, state: &str) -> String {
+    format!("/{subsystem}/{state}")
+}
+
+/// Channel metadata of a state: its bus metadata as strings.
+pub fn channel_metadata(info: &StateInfo) -> BTreeMap<String, String> {
+    let m = &info.meta;
+    BTreeMap::from([
+        ("subsystem".into(), info.subsystem.clone()),
+        ("state".into(), info.name.clone()),
+        ("index".into(), m.index.to_string()),
+        ("units".into(), m.units.clone()),
+        ("writable".into(), m.writable.to_string()),
+        ("rate_hz".into(), m.rate_hz.to_string()),
+        ("min".into(), m.min.to_string()),
+        ("max".into(), m.max.to_string()),
+        ("device".into(), m.device.clone()),
+    ])
+}
+
+/// A recorded channel, as `replay` and `plot` see it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Channel {
+    /// Subsystem.
+    pub subsystem: String,
+    /// State name.
+    pub state: String,
+    /// Metadata as recorded.
+    pub meta: StateMeta,
+}
+
+impl Channel {
+    /// `subsystem/state`.
+    pub fn qualified_name(&self) -> String {
+        format!("{}/{}", self.subsystem, self.state)
+    }
+
+    fn from_mcap(path: &Path, c: &mcap::Channel<'_>) -> Result<Self> {
+        let bad = |detail: String| CliError::BadRecording {
+            path: path.into(),
+            detail,
+        };
+        let schema_ok = c
+            .schema
+            .as_ref()
+            .is_some_and(|s| s.name == SCHEMA_NAME && s.encoding == SCHEMA_ENCODING);
+        if !schema_ok || c.message_encoding != MESSAGE_ENCODING {
+            return Err(bad(format!(
+                "channel {:?} is not a Conductor state channel (schema {SCHEMA_NAME}, encoding {MESSAGE_ENCODING})",
+                c.topic
+            )));
+        }
+        let md = &c.metadata;
+        let get = |k: &str| {
+            md.get(k)
+                .ok_or_else(|| bad(format!("channel {:?} lacks metadata {k:?}", c.topic)))
+        };
+        let num = |k: &str| -> Result<f64> {
+            get(k)?.parse().map_err(|_| {
+                bad(format!(
+                    "channel {:?}: metadata {k:?} is not a number",
+                    c.topic
+                ))
+            })
+        };
+        Ok(Self {
+            subsystem: get("subsystem")?.clone(),
+            state: get("state")?.clone(),
+            meta: StateMeta {
+                index: num("index")? as u32,
+                units: get("units")?.clone(),
+                writable: get("writable")? == "true",
+                rate_hz: num("rate_hz")?,
+                min: num("min")?,
+                max: num("max")?,
+                device: md.get("device").cloned().unwrap_or_default(),
+            },
+        })
+    }
+}
+
+/// One recorded sample, compact (replay keeps every sample of a file in memory).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// `log_time`: sample time, CLOCK_MONOTONIC ns.
+    pub t_ns: u64,
+    /// Index into [`Recording::channels`].
+    pub channel: u16,
+    /// Status flags.
+    pub status: u32,
+    /// Value (NaN for `null`).
+    pub value: f64,
+    /// Executor tick.
+    pub tick: u64,
+}
+
+/// A whole recording in memory, samples sorted by time.
+#[derive(Debug, Clone, Default)]
+pub struct Recording {
+    /// The channels, in order of first appearance.
+    pub channels: Vec<Channel>,
+    /// Every sample, sorted by `t_ns` (stable: equal times keep file order).
+    pub samples: Vec<Sample>,
+    /// Whether the file ended early (no footer); what was readable is kept.
+    pub truncated: bool,
+}
+
+impl Recording {
+    /// Reads `path`. A file without its end (killed writer) yields what is readable, with
+    /// `truncated` set.
+    pub fn load(path: &Path) -> Result<Self> {
+        let buf = std::fs::read(path).map_err(|e| CliError::io(path, e))?;
+        let stream =
+            mcap::MessageStream::new_with_options(&buf, mcap::read::Options::IgnoreEndMagic.into())
+                .map_err(|e| CliError::mcap(path, e))?;
+        let mut rec = Recording::default();
+        let mut ids: BTreeMap<u16, u16> = BTreeMap::new();
+        for m in stream {
+            let m = match m {
+                Ok(m) => m,
+                Err(_) if !rec.samples.is_empty() || !rec.channels.is_empty() => {
+                    rec.truncated = true;
+                    break;
+                }
+                Err(e) => return Err(CliError::mcap(path, e)),
+            };
+            let idx = match ids.get(&m.channel.id) {
+                Some(&i) => i,
+                None => {
+                    let c = Channel::from_mcap(path, &m.channel)?;
+                    let i =
+                        u16::try_from(rec.channels.len()).map_err(|_| CliError::BadRecording {
+                            path: path.into(),
+                            detail: "more than 65535 channels".into(),
+                        })?;
+                    rec.channels.push(c);
+                    ids.insert(m.channel.id, i);
+                    i
+                }
+            };
+            let body: Message =
+                serde_json::from_slice(&m.data).map_err(|e| CliError::BadRecording {
+                    path: path.into(),
+                    detail: format!("message on {:?}: {e}", m.channel.topic),
+                })?;
+            rec.samples.push(Sample {
+                t_ns: m.log_time,
+                channel: idx,
+                status: body.status,
+                value: body.value_or_nan(),
+                tick: body.tick,
+            });
+        }
+        if !rec.truncated && mcap::read::footer(&buf).is_err() {
+            rec.truncated = true;
+        }
+        rec.samples.sort_by_key(|s| s.t_ns);
+        Ok(rec)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn schema_is_json_and_names_every_field() {
+        let v: serde_json::Value = serde_json::from_str(SCHEMA).unwrap();
+        let props = v["properties"].as_object().unwrap();
+        let req: Vec<&str> = v["required"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_str().unwrap())
+            .collect();
+        // Every field of Message is described and required.
+        let m = serde_json::to_value(Message::of(&StateSample::default())).unwrap();
+        for k in m.as_object().unwrap().keys() {
+            assert!(props.contains_key(k), "{k}");
+            assert!(req.contains(&k.as_str()), "{k}");
+        }
+        assert_eq!(props.len(), m.as_object().unwrap().len());
+    }
+
+    #[test]
+    fn non_finite_values_become_null() {
+        let s = StateSample {
+            value: f64::NAN,
+            ..Default::default()
+        };
+        let json = serde_json::to_string(&Message::of(&s)).unwrap();
+        assert!(json.contains("\"value\":null"), "{json}");
+        let back: Message = serde_json::from_str(&json).unwrap();
+        assert!(back.value_or_nan().is_nan());
+    }
+}

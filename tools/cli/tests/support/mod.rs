@@ -1,0 +1,242 @@
+//! Shared by the CLI integration tests: the `conductor` binary, simulated executors (from
+//! `conductor-examples`), background children killed on drop, and the test venv's Python.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::path::PathBuf;
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use conductor_bus::{Domain, StateMeta, StateSpec};
+use conductor_examples::sim::{self, SimHandle, SimSpec};
+use serde_json::Value;
+
+pub fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// `conductor --domain <d>`.
+pub fn conductor(d: &Domain) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_conductor"));
+    c.arg("--domain").arg(d.name());
+    c
+}
+
+/// Runs to completion; panics with stderr when it fails.
+pub fn ok(cmd: &mut Command) -> String {
+    let out = cmd.output().expect("run conductor");
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed: {}\n{}",
+        String::from_utf8_lossy(&out.stderr),
+        String::from_utf8_lossy(&out.stdout)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Runs to completion and expects failure; returns stderr.
+pub fn fails(cmd: &mut Command) -> String {
+    let out: Output = cmd.output().expect("run conductor");
+    assert!(
+        !out.status.success(),
+        "{cmd:?} should have failed; stdout: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    String::from_utf8(out.stderr).unwrap()
+}
+
+/// A state spec.
+pub fn state(
+    index: u32,
+    name: &str,
+    units: &str,
+    writable: bool,
+    (min, max): (f64, f64),
+    rate: f64,
+    device: &str,
+) -> StateSpec {
+    StateSpec::new(
+        name,
+        StateMeta {
+            index,
+            units: units.into(),
+            writable,
+            rate_hz: rate,
+            min,
+            max,
+            device: device.into(),
+        },
+    )
+}
+
+/// A simulated executor that holds whatever is commanded.
+pub fn hold_sim(d: &Domain, subsystem: &str, rate: f64, states: Vec<StateSpec>) -> SimHandle {
+    let n = states.len();
+    sim::spawn(
+        d,
+        SimSpec {
+            subsystem: subsystem.into(),
+            rate_hz: rate,
+            states,
+            initial: vec![0.0; n],
+            stats_hz: 10.0,
+        },
+        sim::hold,
+    )
+    .expect("simulator")
+}
+
+/// A child process killed (by its pid) when dropped, with its stdout lines on a channel.
+pub struct Bg {
+    pub child: Child,
+    pub lines: mpsc::Receiver<String>,
+}
+
+impl Bg {
+    pub fn spawn(cmd: &mut Command) -> Self {
+        let mut child = cmd
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawn");
+        let (tx, rx) = mpsc::channel();
+        let out = child.stdout.take().unwrap();
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines().map_while(Result::ok) {
+                let _ = tx.send(l);
+            }
+        });
+        Self { child, lines: rx }
+    }
+
+    /// Stdout lines up to and including the first that satisfies `pred`.
+    pub fn until(&mut self, timeout: Duration, pred: impl Fn(&str) -> bool) -> Vec<String> {
+        let end = Instant::now() + timeout;
+        let mut seen = Vec::new();
+        while let Some(left) = end.checked_duration_since(Instant::now()) {
+            match self.lines.recv_timeout(left) {
+                Ok(l) => {
+                    let done = pred(&l);
+                    seen.push(l);
+                    if done {
+                        return seen;
+                    }
+                }
+                Err(_) => break,
+            }
+        }
+        if let Ok(Some(status)) = self.child.try_wait() {
+            let mut err = String::new();
+            use std::io::Read;
+            if let Some(mut e) = self.child.stderr.take() {
+                let _ = e.read_to_string(&mut err);
+            }
+            panic!("child exited ({status}) before the line; stdout {seen:?}; stderr: {err}");
+        }
+        panic!("timed out waiting for a line; got {seen:?}");
+    }
+
+    /// Sends SIGINT (to this child only) and waits; returns (success, stderr).
+    pub fn interrupt(self) -> (bool, String) {
+        // SAFETY: kill(2) on the pid of a child we spawned and have not reaped.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGINT) };
+        self.finish()
+    }
+
+    /// Waits for exit (at most 30 s); returns (success, stderr).
+    pub fn finish(mut self) -> (bool, String) {
+        let end = Instant::now() + Duration::from_secs(30);
+        let status = loop {
+            if let Some(s) = self.child.try_wait().unwrap() {
+                break s;
+            }
+            assert!(Instant::now() < end, "child did not exit");
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let mut err = String::new();
+        use std::io::Read;
+        self.child
+            .stderr
+            .take()
+            .unwrap()
+            .read_to_string(&mut err)
+            .unwrap();
+        (status.success(), err)
+    }
+}
+
+impl Drop for Bg {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// The venv that `cargo xtask test` creates (`tools/python-requirements.txt`), or
+/// `$CONDUCTOR_PYTHON`.
+pub fn python() -> PathBuf {
+    let py = std::env::var_os("CONDUCTOR_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
+    assert!(
+        py.exists(),
+        "{} not found: run `cargo xtask setup` (or create the venv from tools/python-requirements.txt: mcap, jsonschema, iceoryx2)",
+        py.display()
+    );
+    py
+}
+
+/// A fresh temporary directory for one test.
+pub fn tempdir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!(
+        "conductor-cli-{tag}-{}-{}",
+        std::process::id(),
+        conductor_bus::monotonic_ns()
+    ));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// `n` consecutive free UDP ports on 127.0.0.1 (free when checked; the gateway binds them next).
+pub fn free_udp_ports(n: u16) -> u16 {
+    // Different processes and different tests of one process start at different places.
+    static CALLS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let seed = std::process::id() % 997 * 23 + call * 401;
+    for k in 0..200u32 {
+        let base = (20000 + (seed + k * 97) % 40000) as u16;
+        let socks: Vec<_> = (0..n)
+            .map_while(|i| std::net::UdpSocket::bind(("127.0.0.1", base + i)).ok())
+            .collect();
+        if socks.len() == n as usize {
+            return base;
+        }
+    }
+    panic!("no block of {n} free UDP ports");
+}
+
+/// Runs tests/python/check_mcap.py (official `mcap` reader + `jsonschema`) on a recording.
+pub fn check_with_python(file: &Path) -> Value {
+    let out = Command::new(python())
+        .arg(workspace().join("tools/cli/tests/python/check_mcap.py"))
+        .arg(file)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "check_mcap.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Three states of a leg at `rate`.
+pub fn leg(rate: f64) -> Vec<conductor_bus::StateSpec> {
+    vec![
+        state(0, "knee", "rad", true, (-1.5, 2.0), rate, "dKnee"),
+        state(1, "hip", "rad", true, (-1.0, 1.0), rate, "dHip"),
+        state(2, "current", "A", false, (-5.0, 5.0), rate, ""),
+    ]
+}
