@@ -1,4 +1,4 @@
-//! Orderly shutdown on SIGINT/SIGTERM for processes on the bus.
+//! Orderly shutdown on SIGINT/SIGTERM/SIGHUP for processes on the bus.
 //!
 //! Killing a bus process without running its destructors leaves its shared-memory segments and
 //! node records behind until another process cleans up after the dead node. Loops call
@@ -9,17 +9,19 @@ use std::sync::{Arc, OnceLock};
 
 static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 
-/// Installs SIGINT and SIGTERM handlers that only set a flag (async-signal-safe). Idempotent.
+/// Installs SIGINT, SIGTERM and SIGHUP (terminal closed) handlers that only set a flag
+/// (async-signal-safe). Idempotent.
 /// A second signal after the first still only sets the flag; use SIGKILL to force.
 pub fn install() -> std::io::Result<()> {
     let flag = FLAG.get_or_init(|| Arc::new(AtomicBool::new(false)));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    for sig in [SIGINT, SIGTERM, SIGHUP] {
         signal_hook::flag::register(sig, Arc::clone(flag))?;
     }
     Ok(())
 }
 
-/// Whether SIGINT or SIGTERM arrived since [`install`] (false if it was never installed).
+/// Whether SIGINT, SIGTERM or SIGHUP arrived since [`install`] (false if it was never installed).
 #[inline]
 pub fn requested() -> bool {
     FLAG.get().is_some_and(|f| f.load(Ordering::Relaxed))

@@ -98,7 +98,7 @@ pub fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
         }
         if args.count.is_some_and(|c| lines >= c)
             || end.is_some_and(|t| Instant::now() >= t)
-            || crate::stop::requested()
+            || conductor_bus::shutdown::requested()
         {
             return Ok(lines);
         }

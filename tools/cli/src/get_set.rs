@@ -23,7 +23,7 @@ fn wait_for(
                 return Ok(Some(s));
             }
         }
-        if Instant::now() >= deadline || crate::stop::requested() {
+        if Instant::now() >= deadline || conductor_bus::shutdown::requested() {
             return Ok(None);
         }
         std::thread::sleep(Duration::from_millis(1));

@@ -23,7 +23,6 @@ pub mod record;
 pub mod recording;
 pub mod replay;
 pub mod select;
-pub mod stop;
 pub mod top;
 pub mod udp;
 
@@ -41,6 +40,15 @@ pub fn domain(flag: Option<&str>) -> Result<Domain> {
     })
 }
 
+/// Long-running commands poll `conductor_bus::shutdown::requested()` and wind down cleanly on
+/// Ctrl-C / SIGTERM (a recording is finalised, a gateway prints its counters).
+fn install_stop() -> Result<()> {
+    conductor_bus::shutdown::install().map_err(|source| CliError::Os {
+        context: "installing the SIGINT/SIGTERM handler".into(),
+        source,
+    })
+}
+
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<()> {
     let bus = |what: &str| -> Result<Bus> {
@@ -52,23 +60,23 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
         Command::Set(a) => get_set::set(&bus("set")?, a),
         Command::Echo(a) => {
-            stop::install();
+            install_stop()?;
             echo::run(&bus("echo")?, a).map(drop)
         }
         Command::Top(a) => {
-            stop::install();
+            install_stop()?;
             top::run(&bus("top")?, a).map(drop)
         }
         Command::Record(a) => {
-            stop::install();
+            install_stop()?;
             record::run(&bus("record")?, a).map(drop)
         }
         Command::Replay(a) => {
-            stop::install();
+            install_stop()?;
             replay::run(&bus("replay")?, a).map(drop)
         }
         Command::UdpGateway(a) => {
-            stop::install();
+            install_stop()?;
             udp::run(&bus("udp-gateway")?, a).map(drop)
         }
         Command::Plot(a) => plot::run(a).map(drop),

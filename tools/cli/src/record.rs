@@ -172,7 +172,7 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
         if end.is_some_and(|e| now >= e) {
             break "duration";
         }
-        if crate::stop::requested() {
+        if conductor_bus::shutdown::requested() {
             break "signal";
         }
         if let Some(b) = &bar {

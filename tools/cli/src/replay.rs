@@ -106,7 +106,7 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
     );
     if args.wait_subscribers > 0 {
         let deadline = Instant::now() + Duration::from_secs(10);
-        while Instant::now() < deadline && !crate::stop::requested() {
+        while Instant::now() < deadline && !conductor_bus::shutdown::requested() {
             let ready = publishers
                 .iter()
                 .all(|p| (0..p.len()).all(|i| p.subscribers(i) >= args.wait_subscribers));
@@ -156,7 +156,7 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
         let pass_offset = passes as f64 * pass_ns as f64;
         let mut i = 0;
         while i < rec.samples.len() {
-            if crate::stop::requested() {
+            if conductor_bus::shutdown::requested() {
                 break 'outer;
             }
             // Replay time of sample i, in ns since the start.

@@ -74,7 +74,7 @@ pub fn states_wait(bus: &Bus, pattern: &str, wait: f64) -> Result<Vec<StateInfo>
         if !found.is_empty() {
             return Ok(found);
         }
-        if Instant::now() >= deadline || crate::stop::requested() {
+        if Instant::now() >= deadline || conductor_bus::shutdown::requested() {
             let known = bus
                 .list_states()?
                 .iter()

@@ -129,7 +129,7 @@ pub fn run(bus: &Bus, args: &TopArgs) -> Result<u64> {
         }
         let next = Instant::now() + Duration::from_secs_f64(args.interval);
         while Instant::now() < next {
-            if crate::stop::requested() {
+            if conductor_bus::shutdown::requested() {
                 return Ok(printed);
             }
             std::thread::sleep(Duration::from_millis(20));

@@ -261,7 +261,7 @@ pub fn run(bus: &Bus, args: &UdpArgs) -> Result<GatewayReport> {
         })
         .collect();
     let mut buf = [0u8; MAX_REQUEST + 1];
-    while !crate::stop::requested() {
+    while !conductor_bus::shutdown::requested() {
         let waiting = gw.ports.iter().any(|p| !p.pending.is_empty());
         let timeout_ms = if waiting { 1 } else { 50 };
         // SAFETY: `fds` is a live, correctly sized array of pollfd for the duration of the call;
