@@ -26,8 +26,10 @@
 
 #![warn(missing_docs)]
 
+pub mod device;
 pub mod hw;
 pub mod kinds;
+pub mod protocol;
 mod message;
 mod outstanding;
 mod queue;
