@@ -29,9 +29,9 @@
 pub mod device;
 pub mod hw;
 pub mod kinds;
-pub mod protocol;
 mod message;
 mod outstanding;
+pub mod protocol;
 mod queue;
 pub mod sim;
 mod stage;

@@ -409,12 +409,7 @@ impl Dynamixel1 {
             ),
         ];
         Self {
-            dev: RegDevice::new(
-                cred,
-                table,
-                Some(dxl1_channel::POSITION),
-                Some((24, 1, 0)),
-            ),
+            dev: RegDevice::new(cred, table, Some(dxl1_channel::POSITION), Some((24, 1, 0))),
         }
     }
 

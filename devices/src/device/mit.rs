@@ -183,7 +183,11 @@ impl Device for MitMotor {
     fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
         let mut sent = false;
         if let Some(on) = self.enable.take() {
-            let s = if on { MitSpecial::Enter } else { MitSpecial::Exit };
+            let s = if on {
+                MitSpecial::Enter
+            } else {
+                MitSpecial::Exit
+            };
             self.push(Op::MitSpecial(s), ctx, out);
             self.enabled = on;
             sent = true;

@@ -180,7 +180,14 @@ impl OdriveAxis {
         }
     }
 
-    fn update(&self, ch: usize, value: Option<f64>, fault: bool, r: &Reply, out: &mut Bounded<Update>) {
+    fn update(
+        &self,
+        ch: usize,
+        value: Option<f64>,
+        fault: bool,
+        r: &Reply,
+        out: &mut Bounded<Update>,
+    ) {
         let _ = out.push(Update {
             channel: ch,
             value,

@@ -179,7 +179,8 @@ mod tests {
         assert!(
             matches!(
                 e.kind(),
-                serialport::ErrorKind::NoDevice | serialport::ErrorKind::Io(std::io::ErrorKind::NotFound)
+                serialport::ErrorKind::NoDevice
+                    | serialport::ErrorKind::Io(std::io::ErrorKind::NotFound)
             ),
             "{e:?}"
         );

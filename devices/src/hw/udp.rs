@@ -127,6 +127,10 @@ mod tests {
             }
             std::thread::sleep(std::time::Duration::from_millis(1));
         }
-        assert_eq!(got, [10, 11, 12, 13, 14], "split across a small buffer, in order");
+        assert_eq!(
+            got,
+            [10, 11, 12, 13, 14],
+            "split across a small buffer, in order"
+        );
     }
 }

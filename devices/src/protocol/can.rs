@@ -44,10 +44,7 @@ pub fn parse_model_table(s: &str) -> Result<Vec<(u8, Limits)>, ModelTableError> 
         .filter(|e| !e.is_empty())
         .map(|e| {
             let (id, model) = e.split_once('=').ok_or_else(|| ModelTableError(e.into()))?;
-            let id: u8 = id
-                .trim()
-                .parse()
-                .map_err(|_| ModelTableError(e.into()))?;
+            let id: u8 = id.trim().parse().map_err(|_| ModelTableError(e.into()))?;
             let l = mit_limits(model.trim()).ok_or_else(|| ModelTableError(e.into()))?;
             Ok((id, l))
         })
@@ -151,10 +148,7 @@ impl CanMotorProtocol {
 
     fn on_frame(&mut self, f: &CanFrame, ctx: TickCtx, out: &mut Bounded<Reply>) {
         // MIT reply: from the master ID, motor ID in data[0].
-        if f.id() == Id::Standard(self.master)
-            && !f.is_remote_frame()
-            && matches!(f.dlc(), 6 | 8)
-        {
+        if f.id() == Id::Standard(self.master) && !f.is_remote_frame() && matches!(f.dlc(), 6 | 8) {
             let motor = f.data()[0];
             let cred = Credential::id(motor as u32);
             let is_mit = |op: &Op| matches!(op, Op::Mit { .. } | Op::MitSpecial(_));
@@ -202,10 +196,9 @@ impl CanMotorProtocol {
             Ok((node, msg)) => {
                 let cred = Credential::id(node as u32);
                 let cmd = msg.cmd_id();
-                let asked = self.pending.resolve(
-                    cred,
-                    |op| matches!(op, Op::Odrive(m) if m.cmd_id() == cmd),
-                );
+                let asked = self
+                    .pending
+                    .resolve(cred, |op| matches!(op, Op::Odrive(m) if m.cmd_id() == cmd));
                 self.counters.packets_in += 1;
                 // Cyclic messages (heartbeat, encoder estimates) arrive unasked: they are
                 // sampled when received.

@@ -153,10 +153,7 @@ impl Protocol for Dxl1Protocol {
     }
 
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
-        let due = self
-            .core
-            .next_deadline()
-            .is_some_and(|d| d <= ctx.now_ns);
+        let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
         if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
             let Self {
                 core,

@@ -256,10 +256,7 @@ impl Protocol for Dxl2Protocol {
     }
 
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
-        let due = self
-            .core
-            .next_deadline()
-            .is_some_and(|d| d <= ctx.now_ns);
+        let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
         if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
             // The line is quiet for the oldest transaction: a partial packet will never
             // complete. Packets complete behind it still count.

@@ -12,7 +12,9 @@ mod dxl1;
 mod dxl2;
 mod register;
 
-pub use can::{mit_limits, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError, MIT_MODELS};
+pub use can::{
+    mit_limits, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError, MIT_MODELS,
+};
 pub use dxl1::{Dxl1Protocol, Dxl1ReadMode};
 pub use dxl2::{Dxl2Protocol, Dxl2ReadMode};
 pub use register::{wire_ns, Timing};

@@ -358,9 +358,8 @@ impl Core {
         replies: usize,
     ) {
         let t = self.timing;
-        let end = now_ns
-            + wire_ns(tx_bytes + reply_bytes, t.baud)
-            + replies as u64 * t.return_delay_ns;
+        let end =
+            now_ns + wire_ns(tx_bytes + reply_bytes, t.baud) + replies as u64 * t.return_delay_ns;
         self.bus_free_at = self.bus_free_at.max(end);
         // A full table (the decoder has not run for a while): the oldest is given up.
         let slot = match self.txns.iter().position(|x| !x.active) {
@@ -435,9 +434,7 @@ impl Core {
             .txns
             .iter()
             .enumerate()
-            .filter(|(_, x)| {
-                x.active && x.entries.iter().any(|e| e.id == id && !e.done)
-            })
+            .filter(|(_, x)| x.active && x.entries.iter().any(|e| e.id == id && !e.done))
             .min_by_key(|(_, x)| x.seq)
             .map(|(i, x)| (i, x.seq));
         let Some((slot, seq)) = found else {

@@ -11,5 +11,8 @@
 //!   (`conductor-sim`).
 
 mod basic;
+pub mod dxl;
+pub mod fault;
+pub mod hardware;
 
 pub use basic::{LoopbackHardware, SimDevice, SimKind, SimProtocol, SimWord, SineHardware};
