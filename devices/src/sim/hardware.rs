@@ -5,8 +5,12 @@
 
 use std::collections::VecDeque;
 
+use conductor_protocols::can::CanFrame;
+
+use super::can_motors::{CanNode, NodeSnapshot};
 use super::dxl::{DxlBusSim, DxlSimConfig, DxlSimStats};
 use super::fault::{FaultConfig, FaultInjector, FaultRecord};
+use super::slcan_adapter::{SlcanAdapterSim, SlcanSimStats};
 use crate::stage::{Hardware, HwError, TickCtx};
 
 /// What the host sent in one `transmit`, as the simulator saw it.
@@ -158,6 +162,144 @@ impl Hardware for DxlSimHardware {
             self.sim.advance(ctx.now_ns);
         }
         self.bytes_to_host += n as u64;
+        Ok(n)
+    }
+}
+
+/// CAN motors on an in-process bus, as frame hardware: each transmitted frame reaches every
+/// node; their answers arrive `latency_ns` later (one frame time at 1 Mbit/s is ~0.13 ms).
+pub struct CanSimHardware {
+    nodes: Vec<Box<dyn CanNode>>,
+    queue: VecDeque<(u64, CanFrame)>,
+    latency_ns: u64,
+    scratch: Vec<CanFrame>,
+    frames_from_host: u64,
+}
+
+impl std::fmt::Debug for CanSimHardware {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CanSimHardware")
+            .field("nodes", &self.nodes.len())
+            .finish()
+    }
+}
+
+impl CanSimHardware {
+    /// A bus with `nodes`.
+    pub fn new(nodes: Vec<Box<dyn CanNode>>, latency_ns: u64) -> Self {
+        Self {
+            nodes,
+            queue: VecDeque::with_capacity(256),
+            latency_ns,
+            scratch: Vec::with_capacity(64),
+            frames_from_host: 0,
+        }
+    }
+
+    /// The nodes' states.
+    pub fn snapshots(&self) -> Vec<NodeSnapshot> {
+        self.nodes.iter().map(|n| n.snapshot()).collect()
+    }
+
+    /// Frames the host transmitted.
+    pub fn frames_from_host(&self) -> u64 {
+        self.frames_from_host
+    }
+}
+
+impl Hardware for CanSimHardware {
+    type Word = CanFrame;
+
+    fn transmit(&mut self, words: &[CanFrame], ctx: TickCtx) -> Result<usize, HwError> {
+        for f in words {
+            self.frames_from_host += 1;
+            self.scratch.clear();
+            for n in &mut self.nodes {
+                n.on_frame(f, ctx.now_ns, &mut self.scratch);
+            }
+            for r in &self.scratch {
+                self.queue.push_back((ctx.now_ns + self.latency_ns, *r));
+            }
+        }
+        Ok(words.len())
+    }
+
+    fn receive(&mut self, out: &mut [CanFrame], ctx: TickCtx) -> Result<usize, HwError> {
+        self.scratch.clear();
+        for n in &mut self.nodes {
+            n.poll(ctx.now_ns, &mut self.scratch);
+        }
+        for r in &self.scratch {
+            self.queue.push_back((ctx.now_ns, *r));
+        }
+        let mut k = 0;
+        while k < out.len() {
+            match self.queue.front() {
+                Some(&(ready, f)) if ready <= ctx.now_ns => {
+                    out[k] = f;
+                    k += 1;
+                    self.queue.pop_front();
+                }
+                _ => break,
+            }
+        }
+        Ok(k)
+    }
+}
+
+/// The SLCAN adapter simulator as byte hardware (the serial side of a USB-CAN adapter), for
+/// running [`crate::hw::SlcanHardware`] in process. Answers are available at once.
+#[derive(Debug)]
+pub struct SlcanSimPort {
+    adapter: SlcanAdapterSim,
+    out: VecDeque<u8>,
+    scratch: Vec<u8>,
+    now_ns: u64,
+}
+
+impl SlcanSimPort {
+    /// The adapter behind a byte port.
+    pub fn new(adapter: SlcanAdapterSim) -> Self {
+        Self {
+            adapter,
+            out: VecDeque::with_capacity(4096),
+            scratch: Vec::with_capacity(4096),
+            now_ns: 0,
+        }
+    }
+
+    /// The adapter.
+    pub fn adapter(&self) -> &SlcanAdapterSim {
+        &self.adapter
+    }
+
+    /// The adapter's counters.
+    pub fn stats(&self) -> SlcanSimStats {
+        self.adapter.stats()
+    }
+}
+
+impl Hardware for SlcanSimPort {
+    type Word = u8;
+
+    fn transmit(&mut self, words: &[u8], ctx: TickCtx) -> Result<usize, HwError> {
+        // The open sequence runs before the executor's clock: keep time monotonic.
+        self.now_ns = self.now_ns.max(ctx.now_ns);
+        self.scratch.clear();
+        self.adapter.feed(words, self.now_ns, &mut self.scratch);
+        self.out.extend(&self.scratch);
+        Ok(words.len())
+    }
+
+    fn receive(&mut self, out: &mut [u8], ctx: TickCtx) -> Result<usize, HwError> {
+        self.now_ns = self.now_ns.max(ctx.now_ns);
+        self.scratch.clear();
+        self.adapter.poll(self.now_ns, &mut self.scratch);
+        self.out.extend(&self.scratch);
+        let n = out.len().min(self.out.len());
+        for (o, b) in out.iter_mut().zip(self.out.drain(..n)) {
+            *o = b;
+        }
         Ok(n)
     }
 }

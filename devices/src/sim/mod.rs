@@ -11,8 +11,10 @@
 //!   (`conductor-sim`).
 
 mod basic;
+pub mod can_motors;
 pub mod dxl;
 pub mod fault;
 pub mod hardware;
+pub mod slcan_adapter;
 
 pub use basic::{LoopbackHardware, SimDevice, SimKind, SimProtocol, SimWord, SineHardware};
