@@ -15,7 +15,7 @@
 //!
 //! [`CanFrame`]: conductor_protocols::can::CanFrame
 
-mod fd;
+pub(crate) mod fd;
 mod memory;
 mod serial;
 mod slcan;

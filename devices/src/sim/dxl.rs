@@ -308,6 +308,11 @@ impl DxlBusSim {
         }
     }
 
+    /// IDs of the servos, in bus order.
+    pub fn ids(&self) -> Vec<u8> {
+        self.servos.iter().map(|s| s.table[7]).collect()
+    }
+
     /// The servo with `id`.
     pub fn servo(&self, id: u8) -> Option<&SimServo> {
         self.servos

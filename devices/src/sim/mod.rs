@@ -15,6 +15,7 @@ pub mod can_motors;
 pub mod dxl;
 pub mod fault;
 pub mod hardware;
+pub mod runner;
 pub mod slcan_adapter;
 
 pub use basic::{LoopbackHardware, SimDevice, SimKind, SimProtocol, SimWord, SineHardware};
