@@ -28,7 +28,7 @@ fn tick<H: Hardware<Word = CanFrame>>(
     link: &mut LinkOf<CanMotorProtocol, H>,
     devs: &mut [Box<dyn Device>],
     k: u64,
-    prep: impl Fn(usize, &mut dyn Device, TickCtx),
+    prep: impl Fn(usize, &mut dyn Device, TickCtx, &mut Bounded<Request>),
 ) -> Vec<(usize, Update)> {
     let ctx = TickCtx {
         tick: k,
@@ -36,7 +36,7 @@ fn tick<H: Hardware<Word = CanFrame>>(
     };
     let mut reqs = Bounded::<Request>::with_capacity(64);
     for (i, d) in devs.iter_mut().enumerate() {
-        prep(i, d.as_mut(), ctx);
+        prep(i, d.as_mut(), ctx, &mut reqs);
         d.flush(ctx, &mut reqs);
     }
     link.encode(reqs.as_slice(), ctx);
@@ -85,8 +85,8 @@ fn mit_writes_of_a_tick_combine_into_one_command() {
     let mut seen = 0;
     for k in 0..1000 {
         let before = link.hardware().frames_from_host();
-        let ups = tick(&mut link, &mut devs, k, |i, d, ctx| {
-            d.sample(mit_channel::POSITION, ctx, &mut Bounded::with_capacity(1));
+        let ups = tick(&mut link, &mut devs, k, |i, d, ctx, q| {
+            d.sample(mit_channel::POSITION, ctx, q);
             if k > 0 {
                 d.write(mit_channel::POSITION, 0.5 * (i as f64 + 1.0), ctx);
                 d.write(mit_channel::KP, 20.0, ctx);
@@ -122,8 +122,8 @@ fn an_absent_motor_goes_stale_and_is_counted() {
     let mut devs = mit_devices(&[1, 9]);
     let mut stale = 0;
     for k in 0..10 {
-        for (i, u) in tick(&mut link, &mut devs, k, |_, d, ctx| {
-            d.sample(mit_channel::POSITION, ctx, &mut Bounded::with_capacity(1));
+        for (i, u) in tick(&mut link, &mut devs, k, |_, d, ctx, q| {
+            d.sample(mit_channel::POSITION, ctx, q);
         }) {
             if i == 1 {
                 assert_eq!(u.value, None);
@@ -157,9 +157,9 @@ fn mit_over_slcan() {
         let mut devs = mit_devices(&[1, 2, 3]);
         let mut values = 0;
         for k in 0..200 {
-            let ups = tick(&mut link, &mut devs, k, |i, d, ctx| {
-                d.sample(mit_channel::POSITION, ctx, &mut Bounded::with_capacity(1));
-                d.sample(mit_channel::VELOCITY, ctx, &mut Bounded::with_capacity(1));
+            let ups = tick(&mut link, &mut devs, k, |i, d, ctx, q| {
+                d.sample(mit_channel::POSITION, ctx, q);
+                d.sample(mit_channel::VELOCITY, ctx, q);
                 d.write(mit_channel::POSITION, -0.3 * (i as f64 + 1.0), ctx);
             });
             values += ups.iter().filter(|(_, u)| u.value.is_some()).count();
@@ -200,7 +200,9 @@ fn mit_over_slcan() {
 #[test]
 fn odrive_polled_and_cyclic() {
     for poll in [true, false] {
-        let nodes: Vec<Box<dyn CanNode>> = vec![Box::new(OdriveAxisSim::new(3, 100, 10))];
+        // Polled: no cyclic messages at all, every value must come from a request.
+        let (hb, enc) = if poll { (0, 0) } else { (100, 10) };
+        let nodes: Vec<Box<dyn CanNode>> = vec![Box::new(OdriveAxisSim::new(3, hb, enc))];
         let hw = CanSimHardware::new(nodes, 150_000);
         let mut link = LinkOf::with_fill(protocol(), hw, 64, blank());
         let mut devs: Vec<Box<dyn Device>> = vec![Box::new(OdriveAxis::new(
@@ -212,17 +214,13 @@ fn odrive_polled_and_cyclic() {
         let mut last = None;
         let mut states = Vec::new();
         for k in 0..500 {
-            for (_, u) in tick(&mut link, &mut devs, k, |_, d, ctx| {
-                let mut q = Bounded::with_capacity(4);
-                d.sample(odrive_channel::POSITION, ctx, &mut q);
-                d.sample(odrive_channel::VELOCITY, ctx, &mut q);
-                d.sample(odrive_channel::STATE, ctx, &mut q);
-                // Position and velocity share one request; state is the heartbeat.
-                assert_eq!(q.len(), if poll { 2 } else { 0 });
-                for r in q.as_slice() {
-                    // Requests go through the normal path.
-                    let _ = r;
-                }
+            for (_, u) in tick(&mut link, &mut devs, k, |_, d, ctx, q| {
+                // Position and velocity share one request; state is the heartbeat's.
+                let before = q.len();
+                d.sample(odrive_channel::POSITION, ctx, q);
+                d.sample(odrive_channel::VELOCITY, ctx, q);
+                d.sample(odrive_channel::STATE, ctx, q);
+                assert_eq!(q.len() - before, if poll { 2 } else { 0 });
                 d.write(odrive_channel::POSITION, 2.0, ctx);
             }) {
                 if u.channel == odrive_channel::POSITION {
@@ -237,9 +235,6 @@ fn odrive_polled_and_cyclic() {
         assert!(snap.enabled, "closed loop after enable_on_start");
         assert!((snap.position - 2.0).abs() < 1e-3, "{snap:?}");
         assert!((last.unwrap() - 2.0).abs() < 0.05, "{last:?}");
-        assert!(
-            states.iter().any(|s| *s == Some(8.0)),
-            "heartbeat state closed loop"
-        );
+        assert!(states.contains(&Some(8.0)), "heartbeat state closed loop");
     }
 }

@@ -287,8 +287,8 @@ impl Core {
                     });
                 }
             }
-            for i in 0..entries.len() {
-                entries[i] = self.span_of(entries[i].id);
+            for e in entries.iter_mut() {
+                *e = self.span_of(e.id);
             }
         }
         let first = *entries.first()?;
