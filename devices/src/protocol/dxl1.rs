@@ -184,3 +184,140 @@ impl Protocol for Dxl1Protocol {
         c
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::message::{Credential, Op, ReplyData};
+
+    fn req(id: u32, op: Op, tick: u64) -> Request {
+        Request {
+            cred: Credential::id(id),
+            op,
+            tick,
+            t_request_ns: tick * 1_000_000,
+        }
+    }
+
+    fn ctx(tick: u64) -> TickCtx {
+        TickCtx {
+            tick,
+            now_ns: tick * 1_000_000,
+        }
+    }
+
+    /// A status packet from servo `id` (what an AX/MX sends).
+    fn status(id: u8, err: u8, data: &[u8]) -> Vec<u8> {
+        let mut b = [0u8; 64];
+        let n = dxl::status(&mut b, id, ErrorBits(err), data).unwrap();
+        b[..n].to_vec()
+    }
+
+    #[test]
+    fn sync_write_and_bulk_read_then_matched_replies() {
+        let timing = Timing {
+            baud: 1_000_000,
+            return_delay_ns: 0,
+            timeout_ns: 500_000,
+        };
+        let mut p = Dxl1Protocol::new(timing, Dxl1ReadMode::Bulk, 4, 16);
+        let reqs = [
+            req(
+                1,
+                Op::Write {
+                    addr: 30,
+                    len: 2,
+                    value: 512,
+                },
+                0,
+            ),
+            req(
+                2,
+                Op::Write {
+                    addr: 30,
+                    len: 2,
+                    value: 512,
+                },
+                0,
+            ),
+            req(1, Op::Read { addr: 36, len: 2 }, 0),
+            req(2, Op::Read { addr: 36, len: 2 }, 0),
+        ];
+        let mut out = Bounded::with_capacity(256);
+        p.encode(&reqs, &mut out, ctx(0));
+        // protocols.md §1.11: SYNC WRITE goal 512 to ids 1, 2.
+        let sync_write = [
+            0xFF, 0xFF, 0xFE, 0x0A, 0x83, 0x1E, 0x02, 0x01, 0x00, 0x02, 0x02, 0x00, 0x02, 0x4D,
+        ];
+        assert_eq!(&out.as_slice()[..14], &sync_write);
+        let (bulk, n) = dxl::parse(&out.as_slice()[14..]).unwrap();
+        assert_eq!(14 + n, out.len(), "exactly two packets");
+        assert_eq!((bulk.id, bulk.code), (0xFE, 0x92));
+        assert_eq!(bulk.params, &[0x00, 2, 1, 36, 2, 2, 36]);
+        let mut replies = Bounded::with_capacity(16);
+        let mut wire = status(1, 0, &[0x00, 0x02]);
+        // Servo 2 is overloaded: an alarm bit, the data still valid.
+        wire.extend(status(2, ErrorBits::OVERLOAD, &[0x10, 0x01]));
+        p.decode(&wire, &mut replies, ctx(1));
+        p.expire(&mut replies, ctx(1));
+        let r = replies.as_slice();
+        assert_eq!(r.len(), 3, "{r:?}");
+        assert_eq!(
+            r[0].data,
+            ReplyData::Register {
+                addr: 36,
+                len: 2,
+                value: 512
+            }
+        );
+        assert_eq!(r[1].data, ReplyData::DeviceError { code: 0x20 });
+        assert_eq!(
+            r[2].data,
+            ReplyData::Register {
+                addr: 36,
+                len: 2,
+                value: 0x110
+            }
+        );
+        let c = p.counters();
+        assert_eq!(
+            (c.packets_in, c.device_errors, c.missing_replies),
+            (2, 1, 0)
+        );
+    }
+
+    #[test]
+    fn single_mode_reads_one_servo_per_window_and_keeps_the_others_queued() {
+        let timing = Timing {
+            baud: 1_000_000,
+            return_delay_ns: 0,
+            timeout_ns: 200_000,
+        };
+        let mut p = Dxl1Protocol::new(timing, Dxl1ReadMode::Single, 4, 16);
+        let mut out = Bounded::with_capacity(256);
+        let mut replies = Bounded::with_capacity(16);
+        let reads = [
+            req(1, Op::Read { addr: 36, len: 2 }, 0),
+            req(2, Op::Read { addr: 36, len: 2 }, 0),
+        ];
+        p.encode(&reads, &mut out, ctx(0));
+        let (pk, _) = dxl::parse(out.as_slice()).unwrap();
+        assert_eq!((pk.id, pk.code, pk.params), (1, 0x02, &[36u8, 2][..]));
+        p.decode(&status(1, 0, &[1, 0]), &mut replies, ctx(1));
+        p.expire(&mut replies, ctx(1));
+        assert_eq!(replies.len(), 1);
+        // Next window: servo 2, whose request waited (no new requests needed).
+        out.clear();
+        p.encode(&[], &mut out, ctx(1));
+        let (pk, _) = dxl::parse(out.as_slice()).unwrap();
+        assert_eq!(pk.id, 2);
+        // Servo 2 never answers: missing at the deadline, counted.
+        replies.clear();
+        p.expire(&mut replies, ctx(3));
+        assert!(matches!(
+            replies.as_slice()[0].data,
+            ReplyData::Missing { .. }
+        ));
+        assert_eq!(p.counters().missing_replies, 1);
+    }
+}

@@ -280,3 +280,98 @@ impl Protocol for Dxl2Protocol {
         c
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::message::{Credential, Op, ReplyData};
+
+    fn req(id: u32, op: Op, tick: u64) -> Request {
+        Request {
+            cred: Credential::id(id),
+            op,
+            tick,
+            t_request_ns: tick * 100_000,
+        }
+    }
+
+    fn ctx(tick: u64) -> TickCtx {
+        TickCtx {
+            tick,
+            now_ns: tick * 100_000,
+        }
+    }
+
+    fn timing() -> Timing {
+        Timing {
+            baud: 1_000_000,
+            return_delay_ns: 0,
+            timeout_ns: 1_000_000,
+        }
+    }
+
+    /// Ticks faster than the bus: while the previous transaction is on the wire nothing is
+    /// sent, and the requests that pile up are coalesced (latest goal wins, one read).
+    #[test]
+    fn busy_bus_defers_and_coalesces() {
+        let mut p = Dxl2Protocol::new(timing(), Dxl2ReadMode::Sync, 2, 16);
+        let mut out = Bounded::with_capacity(512);
+        let goal = |v, t| {
+            req(
+                1,
+                Op::Write {
+                    addr: 116,
+                    len: 4,
+                    value: v,
+                },
+                t,
+            )
+        };
+        let read = |t| req(1, Op::Read { addr: 132, len: 4 }, t);
+        p.encode(&[goal(100, 0), read(0)], &mut out, ctx(0));
+        let first = out.len();
+        assert!(first > 0);
+        // 0.1 ms later: the read's reply (15 bytes, 0.15 ms at 1 Mbit/s) is still due.
+        p.encode(&[goal(200, 1), read(1)], &mut out, ctx(1));
+        p.encode(&[goal(300, 2), read(2)], &mut out, ctx(2));
+        assert_eq!(out.len(), first, "nothing sent while the bus is busy");
+        // Later: one SYNC WRITE carrying the newest goal, one SYNC READ.
+        out.clear();
+        p.encode(&[], &mut out, ctx(10));
+        let mut buf = out.as_slice().to_vec();
+        let pk = conductor_protocols::dynamixel2::parse_in_place(&mut buf).unwrap();
+        assert_eq!(pk.instruction, 0x83);
+        assert_eq!(&pk.params[4..], &[1, 0x2C, 0x01, 0, 0], "goal 300");
+        assert_eq!(p.counters().packets_out, 4);
+        assert_eq!(p.counters().dropped_requests, 0);
+    }
+
+    #[test]
+    fn unsendable_reads_are_missing_not_silent() {
+        let mut p = Dxl2Protocol::new(timing(), Dxl2ReadMode::Sync, 2, 16);
+        let mut out = Bounded::with_capacity(8); // too small for any packet
+        p.encode(
+            &[req(3, Op::Read { addr: 132, len: 4 }, 0)],
+            &mut out,
+            ctx(0),
+        );
+        assert!(out.is_empty());
+        let mut replies = Bounded::with_capacity(4);
+        p.expire(&mut replies, ctx(0));
+        assert!(matches!(
+            replies.as_slice()[0].data,
+            ReplyData::Missing { .. }
+        ));
+        assert_eq!(p.counters().dropped_requests, 1);
+        // An ID the protocol cannot address is refused the same way.
+        p.encode(
+            &[req(300, Op::Read { addr: 132, len: 4 }, 1)],
+            &mut out,
+            ctx(1),
+        );
+        replies.clear();
+        p.expire(&mut replies, ctx(1));
+        assert_eq!(replies.len(), 1);
+        assert_eq!(p.counters().dropped_requests, 2);
+    }
+}
