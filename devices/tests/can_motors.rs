@@ -164,8 +164,9 @@ fn mit_over_slcan() {
             });
             values += ups.iter().filter(|(_, u)| u.value.is_some()).count();
         }
-        // The simulated adapter answers at once: replies are decoded in the same tick.
-        assert_eq!(values, 200 * 3 * 2, "{dialect:?}");
+        // The simulated adapter answers at once: replies are decoded in the same tick. Every
+        // reply (the 3 enables' included) updates both sampled channels.
+        assert_eq!(values, (200 * 3 + 3) * 2, "{dialect:?}");
         let s = link.hardware().stats();
         assert_eq!(
             s.frames_out,

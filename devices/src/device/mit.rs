@@ -85,8 +85,10 @@ pub struct MitMotor {
     enable: Option<bool>,
     enabled: bool,
     commanded: bool,
-    /// Bit per channel sampled since the last reply.
+    /// Bit per channel ever sampled: every reply updates them.
     sampled: u8,
+    /// A sample was asked for this tick: a frame must go out.
+    poll: bool,
     last_p: Option<f32>,
     fault_tick: Option<u64>,
     faults: u64,
@@ -108,6 +110,7 @@ impl MitMotor {
             enabled: false,
             commanded: false,
             sampled: 0,
+            poll: false,
             last_p: None,
             fault_tick: None,
             faults: 0,
@@ -156,6 +159,7 @@ impl Device for MitMotor {
         // The frame that samples goes out at flush, combined with the tick's writes.
         if channel <= mit_channel::TORQUE {
             self.sampled |= 1 << channel;
+            self.poll = true;
         }
     }
 
@@ -182,6 +186,10 @@ impl Device for MitMotor {
 
     fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
         let mut sent = false;
+        if self.dirty || self.enable.is_some() {
+            // The command's reply answers this tick's samples.
+            self.poll = false;
+        }
         if let Some(on) = self.enable.take() {
             let s = if on {
                 MitSpecial::Enter
@@ -198,7 +206,7 @@ impl Device for MitMotor {
             self.commanded = true;
             sent = true;
         }
-        if !sent && self.sampled != 0 {
+        if !sent && std::mem::take(&mut self.poll) {
             let op = if self.enabled && self.commanded {
                 self.command()
             } else if self.enabled {
@@ -237,7 +245,6 @@ impl Device for MitMotor {
                 t_sample_ns: reply.t_sample_ns,
             });
         }
-        self.sampled = 0;
     }
 
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {

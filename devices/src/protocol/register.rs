@@ -4,7 +4,9 @@
 //!
 //! * Requests that arrive while the bus is still busy with the previous transaction stay
 //!   queued (the thesis' tick cache) and are **coalesced**: a newer write to the same register
-//!   replaces the older one; a repeated read of the same register is answered once for both.
+//!   replaces the older one; repeated reads of the same register share one bus read, and every
+//!   one of them is answered (by its value, or `Missing`). When more reads pile up than the
+//!   stage has room for, the excess is answered `Missing` at once and counted as dropped.
 //! * A transaction is one read instruction (SYNC/FAST SYNC/BULK/FAST BULK READ, or a single
 //!   READ) and the status packets it expects. Status packets arrive in wire order, so a reply
 //!   for a newer transaction closes the older ones: what they still lacked is missing.
@@ -167,6 +169,8 @@ impl Core {
             }
             match r.op {
                 Op::Read { addr, len } if len > 0 && addr.checked_add(len as u16).is_some() => {
+                    // A read of a register already queued shares its bus read: both requests
+                    // are answered by the one value (it is kept as its own waiter).
                     let w = Waiter {
                         cred: r.cred,
                         addr,
@@ -174,18 +178,8 @@ impl Core {
                         tick: r.tick,
                         t_request_ns: r.t_request_ns,
                     };
-                    let slot = self
-                        .want_reads
-                        .as_mut_slice()
-                        .iter_mut()
-                        .find(|q| q.cred == r.cred && q.addr == addr && q.len == len);
-                    match slot {
-                        Some(q) => *q = w,
-                        None => {
-                            if self.want_reads.push(w).is_err() {
-                                self.refuse(r);
-                            }
-                        }
+                    if self.want_reads.push(w).is_err() {
+                        self.refuse(r);
                     }
                 }
                 Op::Write { addr, len, value } if matches!(len, 1 | 2 | 4) => {
