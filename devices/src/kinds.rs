@@ -7,9 +7,26 @@
 
 use std::collections::BTreeMap;
 
+use conductor_protocols::can::CanFrame;
+use conductor_protocols::slcan::{Bitrate, Dialect};
+
+use crate::device::{
+    Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX, MitMotor, OdriveAxis, OdriveMode,
+};
+use crate::hw::{
+    SerialHardware, SerialOptions, SlcanHardware, SlcanOptions, SocketCanHardware, UdpHardware,
+};
 use crate::message::Credential;
+use crate::protocol::{
+    mit_limits, parse_model_table, CanMotorProtocol, Dxl1Protocol, Dxl1ReadMode, Dxl2Protocol,
+    Dxl2ReadMode, Timing,
+};
+use crate::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
+use crate::sim::dxl::DxlSimConfig;
+use crate::sim::fault::FaultConfig;
+use crate::sim::hardware::{CanSimHardware, DxlSimHardware};
 use crate::sim::{LoopbackHardware, SimDevice, SimProtocol, SineHardware};
-use crate::stage::{Device, Link, LinkOf};
+use crate::stage::{Device, Hardware, Link, LinkOf, Protocol, SafeAction};
 
 /// Which stage a kind belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -236,6 +253,115 @@ pub struct Capacity {
     pub devices: usize,
 }
 
+const fn p_int(
+    name: &'static str,
+    default: Option<i64>,
+    lo: f64,
+    hi: f64,
+    doc: &'static str,
+) -> ParamSpec {
+    ParamSpec {
+        name,
+        ty: ParamType::Int,
+        default: match default {
+            Some(v) => Some(ParamDefault::Int(v)),
+            None => None,
+        },
+        range: Some((lo, hi)),
+        choices: &[],
+        doc,
+    }
+}
+
+const fn p_float(
+    name: &'static str,
+    default: f64,
+    lo: f64,
+    hi: f64,
+    doc: &'static str,
+) -> ParamSpec {
+    ParamSpec {
+        name,
+        ty: ParamType::Float,
+        default: Some(ParamDefault::Float(default)),
+        range: Some((lo, hi)),
+        choices: &[],
+        doc,
+    }
+}
+
+const fn p_bool(name: &'static str, default: bool, doc: &'static str) -> ParamSpec {
+    ParamSpec {
+        name,
+        ty: ParamType::Bool,
+        default: Some(ParamDefault::Bool(default)),
+        range: None,
+        choices: &[],
+        doc,
+    }
+}
+
+const fn p_str(
+    name: &'static str,
+    default: Option<&'static str>,
+    choices: &'static [&'static str],
+    doc: &'static str,
+) -> ParamSpec {
+    ParamSpec {
+        name,
+        ty: ParamType::Str,
+        default: match default {
+            Some(v) => Some(ParamDefault::Str(v)),
+            None => None,
+        },
+        range: None,
+        choices,
+        doc,
+    }
+}
+
+const BAUD_DOC: &str = "line speed (bit/s); the protocol stage also times its transactions with it";
+const TIMEOUT_US: ParamSpec = p_int(
+    "timeout_us",
+    Some(2_000),
+    1.0,
+    10_000_000.0,
+    "margin after a transaction's expected end (wire time, return delays) before its replies count as missing (µs)",
+);
+const RETURN_DELAY_US: ParamSpec = p_int(
+    "return_delay_us",
+    Some(0),
+    0.0,
+    508.0,
+    "the servos' Return Delay Time (address 9 × 2 µs); set the servos to 0 for the fastest bus",
+);
+const FAULT_PARAMS: [ParamSpec; 3] = [
+    p_float(
+        "corrupt",
+        0.0,
+        0.0,
+        1.0,
+        "probability that a byte is corrupted (both directions)",
+    ),
+    p_float(
+        "drop",
+        0.0,
+        0.0,
+        1.0,
+        "probability that a byte is lost (both directions)",
+    ),
+    p_int("seed", Some(1), 0.0, 9.0e15, "seed of the fault generator"),
+];
+const MIT_MODEL_NAMES: &[&str] = &[
+    "ak10-9",
+    "ak60-6",
+    "ak70-10",
+    "ak80-6",
+    "ak80-9",
+    "ak80-64",
+    "mini-cheetah",
+];
+
 const SIM_TIMEOUT: ParamSpec = ParamSpec {
     name: "timeout_us",
     ty: ParamType::Int,
@@ -247,6 +373,196 @@ const SIM_TIMEOUT: ParamSpec = ParamSpec {
 
 /// Every kind this build knows.
 pub const KINDS: &[KindSpec] = &[
+    KindSpec {
+        stage: Stage::Hardware,
+        kind: "serial",
+        medium: Some(Medium::Bytes),
+        resource: Some("port"),
+        protocols: &[],
+        params: &[
+            p_str("port", None, &[], "serial device, e.g. /dev/ttyUSB0 or /dev/serial/by-id/usb-FTDI_..."),
+            p_int("baud", Some(1_000_000), 1200.0, 12_000_000.0, BAUD_DOC),
+            p_bool("low_latency", true, "ask the driver for ASYNC_LOW_LATENCY (FTDI: 1 ms latency timer); ignored where unsupported"),
+        ],
+        doc: "A serial port (USB adapter such as the ROBOTIS U2D2, RS-485 adapter, or a pty), raw 8N1, \
+              read and written without blocking.",
+    },
+    KindSpec {
+        stage: Stage::Hardware,
+        kind: "udp",
+        medium: Some(Medium::Bytes),
+        resource: None,
+        protocols: &[],
+        params: &[
+            p_str("remote", None, &[], "peer address host:port (a serial-over-UDP bridge, conductor-sim --udp)"),
+            p_str("local", Some("0.0.0.0:0"), &[], "local address to bind"),
+            p_int("baud", Some(1_000_000), 1200.0, 12_000_000.0, "speed of the serial bus behind the bridge (bit/s), for the protocol's timing"),
+        ],
+        doc: "A byte stream over UDP datagrams (non-blocking, connected to one peer).",
+    },
+    KindSpec {
+        stage: Stage::Hardware,
+        kind: "dynamixel_sim",
+        medium: Some(Medium::Bytes),
+        resource: None,
+        protocols: &[],
+        params: &[
+            p_str("ids", Some("1,2,3,4,5,6"), &[], "servo IDs on the simulated bus, comma-separated"),
+            p_int("baud", Some(1_000_000), 1200.0, 12_000_000.0, BAUD_DOC),
+            RETURN_DELAY_US,
+            p_bool("baud_timing", true, "replies take their wire time at `baud`"),
+            p_float("tau_s", 0.05, 0.0, 100.0, "time constant of the servos' position response (s)"),
+            FAULT_PARAMS[0],
+            FAULT_PARAMS[1],
+            FAULT_PARAMS[2],
+        ],
+        doc: "An in-process Dynamixel Protocol 2.0 bus of XM430 servos (the simulator of \
+              `conductor-sim dxl`, without the pty), with optional fault injection.",
+    },
+    KindSpec {
+        stage: Stage::Hardware,
+        kind: "socketcan",
+        medium: Some(Medium::Can),
+        resource: Some("interface"),
+        protocols: &[],
+        params: &[p_str("interface", None, &[], "CAN interface, e.g. can0 (bring it up first: ip link set can0 up type can bitrate 1000000)")],
+        doc: "A Linux SocketCAN interface, raw socket, non-blocking.",
+    },
+    KindSpec {
+        stage: Stage::Hardware,
+        kind: "slcan",
+        medium: Some(Medium::Can),
+        resource: Some("port"),
+        protocols: &[],
+        params: &[
+            p_str("port", None, &[], "serial device of the USB-CAN adapter, e.g. /dev/ttyACM0"),
+            p_int("baud", Some(115_200), 1200.0, 12_000_000.0, "serial line speed (ignored by USB CDC adapters)"),
+            p_int("bitrate", Some(1_000_000), 10_000.0, 1_000_000.0, "CAN bitrate (a standard Sn rate)"),
+            p_str("dialect", Some("canable"), &["canable", "lawicel"], "SLCAN variant: canable (CR acks, S7 = 750k) or lawicel (z acks, S7 = 800k)"),
+        ],
+        doc: "An SLCAN (LAWICEL) USB-CAN adapter (CANable, CANUSB, ...) spoken in user space over \
+              its serial port: no kernel CAN support needed.",
+    },
+    KindSpec {
+        stage: Stage::Hardware,
+        kind: "can_sim",
+        medium: Some(Medium::Can),
+        resource: None,
+        protocols: &[],
+        params: &[
+            p_str("mit", Some(""), &[], "MIT-mode motor IDs, comma-separated"),
+            p_str("odrive", Some(""), &[], "ODrive node IDs, comma-separated"),
+            p_str("model", Some("ak80-9"), MIT_MODEL_NAMES, "MIT motor model (ranges)"),
+            p_int("latency_us", Some(150), 0.0, 1_000_000.0, "delay of the motors' answers (µs)"),
+            p_int("heartbeat_ms", Some(100), 0.0, 100_000.0, "ODrive heartbeat period (ms, 0 = off)"),
+        ],
+        doc: "An in-process CAN bus with simulated MIT-mode motors and ODrive axes.",
+    },
+    KindSpec {
+        stage: Stage::Protocol,
+        kind: "dynamixel2",
+        medium: Some(Medium::Bytes),
+        resource: None,
+        protocols: &[],
+        params: &[
+            p_str("read", Some("sync"), &["sync", "fast_sync"], "one SYNC READ (a status packet per servo) or one FAST SYNC READ (one combined packet, X430/540 firmware ≥ 45) per transaction; servos reading different spans get a (FAST) BULK READ"),
+            RETURN_DELAY_US,
+            TIMEOUT_US,
+        ],
+        doc: "ROBOTIS Dynamixel Protocol 2.0: a tick's writes become one SYNC WRITE per register, its \
+              reads one SYNC READ / FAST SYNC READ; status packets are matched to the requests by ID; \
+              missing replies make the states stale. Bus timing comes from the hardware's `baud`.",
+    },
+    KindSpec {
+        stage: Stage::Protocol,
+        kind: "dynamixel1",
+        medium: Some(Medium::Bytes),
+        resource: None,
+        protocols: &[],
+        params: &[
+            p_str("read", Some("bulk"), &["bulk", "single"], "one BULK READ for all servos (MX series) or one READ per bus window, round robin (AX series)"),
+            RETURN_DELAY_US,
+            TIMEOUT_US,
+        ],
+        doc: "ROBOTIS Dynamixel Protocol 1.0 (AX/MX/RX): writes become SYNC WRITEs, reads one BULK \
+              READ (or single READs in turn).",
+    },
+    KindSpec {
+        stage: Stage::Protocol,
+        kind: "can_motors",
+        medium: Some(Medium::Can),
+        resource: None,
+        protocols: &[],
+        params: &[
+            p_str("model", Some("ak80-9"), MIT_MODEL_NAMES, "ranges of the MIT-mode motors"),
+            p_str("models", Some(""), &[], "per-motor overrides, e.g. \"1=ak80-9,2=ak10-9\""),
+            p_int("master_id", Some(0), 0.0, 2047.0, "CAN ID the MIT motors reply on (CAN_MASTER)"),
+            TIMEOUT_US,
+        ],
+        doc: "MIT-mode motors and ODrive axes (CAN Simple 0.6) on one classic CAN bus: one frame per \
+              device and tick, all of a tick's frames sent together; MIT replies matched by the motor ID \
+              in the payload, ODrive replies by node ID; cyclic ODrive messages are passed on.",
+    },
+    KindSpec {
+        stage: Stage::Device,
+        kind: "dynamixel_x",
+        medium: None,
+        resource: None,
+        protocols: &["dynamixel2"],
+        params: &[
+            p_int("zero", Some(2048), -1_048_575.0, 1_048_575.0, "raw position meaning 0 rad"),
+            p_int("operating_mode", Some(3), 0.0, 16.0, "the servo's Operating Mode (3 position: goals 0..4095; 4/5 extended: ±256 rev)"),
+            p_float("current_unit_ma", 2.69, 0.01, 100.0, "Present/Goal Current unit (mA)"),
+            p_int("max_current_raw", Some(2047), 1.0, 32767.0, "largest |Present Current| accepted (raw); larger values are treated as damaged"),
+            p_float("max_position_rev", 256.0, 1.0, 524_288.0, "largest |Present Position| accepted (revolutions)"),
+        ],
+        doc: "A Dynamixel X-series servo (XM430/XM540/XH430 control table). Channels: position (rad; \
+              reads Present Position, writes Goal Position), velocity (rad/s), current (A), goal_position \
+              (rad), torque_enable, operating_mode, temperature (°C), voltage (V). Safe action: hold.",
+    },
+    KindSpec {
+        stage: Stage::Device,
+        kind: "dynamixel1",
+        medium: None,
+        resource: None,
+        protocols: &["dynamixel1"],
+        params: &[
+            p_str("model", Some("ax"), &["ax", "mx"], "ax: 1024 steps over 300°; mx: 4096 over 360°"),
+            p_int("zero", Some(-1), -1.0, 4095.0, "raw position meaning 0 rad (-1: the middle, 512 or 2048)"),
+        ],
+        doc: "A Dynamixel AX/MX servo on Protocol 1.0. Channels: position (rad), velocity (rad/s), load \
+              (fraction), torque_enable, temperature (°C), voltage (V). Safe action: hold.",
+    },
+    KindSpec {
+        stage: Stage::Device,
+        kind: "mit_motor",
+        medium: None,
+        resource: None,
+        protocols: &["can_motors"],
+        params: &[
+            p_float("kp", 0.0, 0.0, 500.0, "position gain until the kp channel is written"),
+            p_float("kd", 0.0, 0.0, 5.0, "velocity gain until the kd channel is written"),
+            p_bool("enable_on_start", false, "enter motor mode on the first tick"),
+        ],
+        doc: "An MIT-mode motor (Katz firmware, CubeMars AK). Channels: position (rad), velocity (rad/s), \
+              torque (N·m), kp, kd, enable. A tick's writes form one command; the motor only answers \
+              frames, so a sample re-sends the last command. Safe action: torque off (exit motor mode).",
+    },
+    KindSpec {
+        stage: Stage::Device,
+        kind: "odrive_axis",
+        medium: None,
+        resource: None,
+        protocols: &["can_motors"],
+        params: &[
+            p_str("control_mode", Some("position"), &["position", "velocity", "torque"], "which input the setpoints drive"),
+            p_bool("poll", true, "request values with remote frames (false: use the axis's cyclic messages)"),
+            p_bool("enable_on_start", false, "set the controller mode and closed-loop control on the first tick"),
+        ],
+        doc: "An ODrive axis (CAN Simple, firmware 0.6). Channels: position (rad), velocity (rad/s), \
+              torque (N·m), current (A), state, error, bus_voltage (V), temperature (°C). Safe action: \
+              torque off (idle).",
+    },
     KindSpec {
         stage: Stage::Hardware,
         kind: "sine",
@@ -336,7 +652,186 @@ fn spec(stage: Stage, kind: &str) -> Result<&'static KindSpec, BuildError> {
     })
 }
 
-/// Builds a protocol bound to its hardware.
+/// The safe action a device kind declares (what the executor does when commands stop, unless
+/// the manifest says otherwise); `None` for unknown kinds.
+pub fn safe_action(device_kind: &str) -> Option<SafeAction> {
+    Some(match device_kind {
+        "dynamixel_x" => DynamixelX::SAFE_ACTION,
+        "dynamixel1" => Dynamixel1::SAFE_ACTION,
+        "mit_motor" => MitMotor::SAFE_ACTION,
+        "odrive_axis" => OdriveAxis::SAFE_ACTION,
+        "sim" => SafeAction::Hold,
+        _ => return None,
+    })
+}
+
+fn ids(s: &str, what: &str) -> Result<Vec<u8>, BuildError> {
+    s.split(',')
+        .map(str::trim)
+        .filter(|x| !x.is_empty())
+        .map(|x| {
+            x.parse::<u8>()
+                .map_err(|_| BuildError::Open(format!("{what}: {x:?} is not an ID (0-253)")))
+        })
+        .collect()
+}
+
+fn open_err(what: &str, e: impl std::fmt::Display) -> BuildError {
+    BuildError::Open(format!("{what}: {e}"))
+}
+
+fn addr(s: &str, key: &str) -> Result<std::net::SocketAddr, BuildError> {
+    use std::net::ToSocketAddrs;
+    s.to_socket_addrs()
+        .map_err(|e| open_err(key, e))?
+        .next()
+        .ok_or_else(|| BuildError::Open(format!("{key}: {s:?} resolves to nothing")))
+}
+
+/// The line speed a byte hardware runs at (for the protocol's timing).
+fn hardware_baud(hp: &Params) -> u32 {
+    hp.int("baud")
+        .map_or(1_000_000, |b| b.clamp(1, u32::MAX as i64) as u32)
+}
+
+fn link_bytes<P: Protocol<Word = u8> + 'static>(
+    p: P,
+    hardware: &str,
+    hp: &Params,
+    cap: Capacity,
+) -> Result<Box<dyn Link>, BuildError> {
+    fn boxed<P: Protocol<Word = u8> + 'static, H: Hardware<Word = u8> + 'static>(
+        p: P,
+        h: H,
+        cap: Capacity,
+    ) -> Box<dyn Link> {
+        Box::new(LinkOf::new(p, h, cap.words))
+    }
+    Ok(match hardware {
+        "serial" => {
+            let port = hp.str("port")?;
+            let opts = SerialOptions {
+                baud: hardware_baud(hp),
+                low_latency: hp.bool("low_latency")?,
+                exclusive: true,
+            };
+            boxed(
+                p,
+                SerialHardware::open(port, &opts).map_err(|e| open_err(port, e))?,
+                cap,
+            )
+        }
+        "udp" => {
+            let (local, remote) = (
+                addr(hp.str("local")?, "local")?,
+                addr(hp.str("remote")?, "remote")?,
+            );
+            boxed(
+                p,
+                UdpHardware::open(local, remote).map_err(|e| open_err("udp", e))?,
+                cap,
+            )
+        }
+        "dynamixel_sim" => {
+            let cfg = DxlSimConfig {
+                ids: ids(hp.str("ids")?, "ids")?,
+                baud: hardware_baud(hp),
+                return_delay_us: hp.int("return_delay_us")? as u32,
+                baud_timing: hp.bool("baud_timing")?,
+                tau_s: hp.float("tau_s")?,
+                ..DxlSimConfig::default()
+            };
+            let faults = FaultConfig {
+                corrupt: hp.float("corrupt")?,
+                drop: hp.float("drop")?,
+                seed: hp.int("seed")? as u64,
+                ..FaultConfig::default()
+            };
+            let up = FaultConfig {
+                seed: faults.seed ^ 0x5EED,
+                ..faults
+            };
+            boxed(p, DxlSimHardware::new(cfg, faults, up), cap)
+        }
+        other => {
+            return Err(BuildError::UnknownKind {
+                stage: Stage::Hardware,
+                kind: other.into(),
+            })
+        }
+    })
+}
+
+fn link_can(
+    p: CanMotorProtocol,
+    hardware: &str,
+    hp: &Params,
+    cap: Capacity,
+) -> Result<Box<dyn Link>, BuildError> {
+    let fill = CanFrame::standard(0, &[]).ok_or_else(|| BuildError::Open("CAN frame".into()))?;
+    Ok(match hardware {
+        "socketcan" => {
+            let iface = hp.str("interface")?;
+            let hw = SocketCanHardware::open(iface).map_err(|e| open_err(iface, e))?;
+            Box::new(LinkOf::with_fill(p, hw, cap.words, fill))
+        }
+        "slcan" => {
+            let port = hp.str("port")?;
+            let serial = SerialHardware::open(
+                port,
+                &SerialOptions {
+                    baud: hardware_baud(hp),
+                    low_latency: true,
+                    exclusive: true,
+                },
+            )
+            .map_err(|e| open_err(port, e))?;
+            let bitrate = u32::try_from(hp.int("bitrate")?)
+                .ok()
+                .and_then(Bitrate::from_bps)
+                .ok_or_else(|| BuildError::Open("bitrate: not a standard SLCAN rate (10k, 20k, 50k, 100k, 125k, 250k, 500k, 750k/800k, 1M)".into()))?;
+            let dialect = match hp.str("dialect")? {
+                "lawicel" => Dialect::LAWICEL,
+                _ => Dialect::CANABLE,
+            };
+            let hw = SlcanHardware::open(
+                serial,
+                SlcanOptions {
+                    bitrate,
+                    dialect,
+                    ..SlcanOptions::default()
+                },
+            )
+            .map_err(|e| open_err(port, e))?;
+            Box::new(LinkOf::with_fill(p, hw, cap.words, fill))
+        }
+        "can_sim" => {
+            let limits =
+                mit_limits(hp.str("model")?).ok_or_else(|| BuildError::Param("model".into()))?;
+            let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
+            for id in ids(hp.str("mit")?, "mit")? {
+                nodes.push(Box::new(MitMotorSim::new(id, limits, 0, false)));
+            }
+            for n in ids(hp.str("odrive")?, "odrive")? {
+                nodes.push(Box::new(OdriveAxisSim::new(
+                    n,
+                    hp.int("heartbeat_ms")? as u64,
+                    0,
+                )));
+            }
+            let hw = CanSimHardware::new(nodes, hp.int("latency_us")? as u64 * 1000);
+            Box::new(LinkOf::with_fill(p, hw, cap.words, fill))
+        }
+        other => {
+            return Err(BuildError::UnknownKind {
+                stage: Stage::Hardware,
+                kind: other.into(),
+            })
+        }
+    })
+}
+
+/// Builds a protocol bound to its hardware (opening OS resources: call at start-up).
 pub fn build_link(
     protocol: &str,
     protocol_params: &Params,
@@ -354,14 +849,19 @@ pub fn build_link(
             hardware_medium: hs.medium.expect("hardware has a medium"),
         });
     }
-    match (protocol, hardware) {
-        ("sim", hw) => {
-            let p = SimProtocol::new(
-                cap.in_flight,
-                protocol_params.int("timeout_us")? as u64 * 1000,
-            );
-            let hp = hardware_params;
-            Ok(match hw {
+    let pp = protocol_params;
+    let hp = hardware_params;
+    let timing = || -> Result<Timing, BuildError> {
+        Ok(Timing {
+            baud: hardware_baud(hp),
+            return_delay_ns: pp.int("return_delay_us")? as u64 * 1000,
+            timeout_ns: pp.int("timeout_us")? as u64 * 1000,
+        })
+    };
+    match protocol {
+        "sim" => {
+            let p = SimProtocol::new(cap.in_flight, pp.int("timeout_us")? as u64 * 1000);
+            Ok(match hardware {
                 "sine" => Box::new(LinkOf::new(
                     p,
                     SineHardware::new(
@@ -385,27 +885,101 @@ pub fn build_link(
                 }
             })
         }
-        (other, _) => Err(BuildError::UnknownKind {
+        "dynamixel2" => {
+            let mode = match pp.str("read")? {
+                "fast_sync" => Dxl2ReadMode::Fast,
+                _ => Dxl2ReadMode::Sync,
+            };
+            let p = Dxl2Protocol::new(timing()?, mode, cap.devices, cap.in_flight);
+            link_bytes(p, hardware, hp, cap)
+        }
+        "dynamixel1" => {
+            let mode = match pp.str("read")? {
+                "single" => Dxl1ReadMode::Single,
+                _ => Dxl1ReadMode::Bulk,
+            };
+            let p = Dxl1Protocol::new(timing()?, mode, cap.devices, cap.in_flight);
+            link_bytes(p, hardware, hp, cap)
+        }
+        "can_motors" => {
+            let default =
+                mit_limits(pp.str("model")?).ok_or_else(|| BuildError::Param("model".into()))?;
+            let table = parse_model_table(pp.str("models")?)
+                .map_err(|e| BuildError::Open(format!("models: {e}")))?;
+            let p = CanMotorProtocol::new(
+                default,
+                table,
+                pp.int("master_id")? as u16,
+                pp.int("timeout_us")? as u64 * 1000,
+                cap.in_flight,
+            );
+            link_can(p, hardware, hp, cap)
+        }
+        other => Err(BuildError::UnknownKind {
             stage: Stage::Protocol,
             kind: other.into(),
         }),
     }
 }
 
-/// Builds a device.
+/// Builds a device at `cred` (its bus address from the manifest).
 pub fn build_device(
     kind: &str,
-    _params: &Params,
+    params: &Params,
     cred: Credential,
 ) -> Result<Box<dyn Device>, BuildError> {
     spec(Stage::Device, kind)?;
-    match kind {
-        "sim" => Ok(Box::new(SimDevice::new(cred))),
-        other => Err(BuildError::UnknownKind {
-            stage: Stage::Device,
-            kind: other.into(),
-        }),
-    }
+    let p = params;
+    Ok(match kind {
+        "sim" => Box::new(SimDevice::new(cred)),
+        "dynamixel_x" => Box::new(DynamixelX::new(
+            cred,
+            DxlXConfig {
+                zero: p.int("zero")?,
+                operating_mode: p.int("operating_mode")? as u8,
+                current_unit_ma: p.float("current_unit_ma")?,
+                max_current_raw: p.int("max_current_raw")?,
+                max_position_rev: p.float("max_position_rev")?,
+            },
+        )),
+        "dynamixel1" => {
+            let model = match p.str("model")? {
+                "mx" => Dxl1Model::Mx,
+                _ => Dxl1Model::Ax,
+            };
+            let zero = match (p.int("zero")?, model) {
+                (z, _) if z >= 0 => z,
+                (_, Dxl1Model::Ax) => 512,
+                (_, Dxl1Model::Mx) => 2048,
+            };
+            Box::new(Dynamixel1::new(cred, model, zero))
+        }
+        "mit_motor" => Box::new(MitMotor::new(
+            cred,
+            p.float("kp")? as f32,
+            p.float("kd")? as f32,
+            p.bool("enable_on_start")?,
+        )),
+        "odrive_axis" => {
+            let mode = match p.str("control_mode")? {
+                "velocity" => OdriveMode::Velocity,
+                "torque" => OdriveMode::Torque,
+                _ => OdriveMode::Position,
+            };
+            Box::new(OdriveAxis::new(
+                cred,
+                mode,
+                p.bool("poll")?,
+                p.bool("enable_on_start")?,
+            ))
+        }
+        other => {
+            return Err(BuildError::UnknownKind {
+                stage: Stage::Device,
+                kind: other.into(),
+            })
+        }
+    })
 }
 
 #[cfg(test)]
@@ -453,5 +1027,123 @@ mod tests {
             Err(BuildError::UnknownKind { .. })
         ));
         assert!(build_device("sim", &Params::default(), Credential::id(1)).is_ok());
+    }
+
+    fn params(stage: Stage, kind: &str, given: &[(&str, ParamValue)]) -> Params {
+        let spec = find(stage, kind).unwrap();
+        Params::new(
+            spec,
+            given
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect(),
+        )
+    }
+
+    fn cap() -> Capacity {
+        Capacity {
+            words: 4096,
+            in_flight: 64,
+            devices: 8,
+        }
+    }
+
+    #[test]
+    fn every_device_kind_builds_with_defaults_and_declares_a_safe_action() {
+        for k in of_stage(Stage::Device) {
+            let d = build_device(
+                k.kind,
+                &params(Stage::Device, k.kind, &[]),
+                Credential::id(1),
+            )
+            .unwrap_or_else(|e| panic!("{}: {e}", k.kind));
+            assert!(!d.channels().is_empty());
+            assert!(safe_action(k.kind).is_some(), "{}", k.kind);
+        }
+        // A writable `position` channel on every actuator.
+        for kind in ["dynamixel_x", "dynamixel1", "mit_motor", "odrive_axis"] {
+            let d =
+                build_device(kind, &params(Stage::Device, kind, &[]), Credential::id(1)).unwrap();
+            let pos = d.channels().iter().find(|c| c.name == "position").unwrap();
+            assert!(pos.readable && pos.writable, "{kind}");
+        }
+    }
+
+    #[test]
+    fn in_process_simulated_links_build() {
+        let s = |v: &str| ParamValue::Str(v.into());
+        for proto in ["dynamixel2", "dynamixel1"] {
+            let pp = params(Stage::Protocol, proto, &[]);
+            let hp = params(Stage::Hardware, "dynamixel_sim", &[]);
+            assert!(
+                build_link(proto, &pp, "dynamixel_sim", &hp, cap()).is_ok(),
+                "{proto}"
+            );
+        }
+        let pp = params(Stage::Protocol, "can_motors", &[("models", s("2=ak10-9"))]);
+        let hp = params(
+            Stage::Hardware,
+            "can_sim",
+            &[("mit", s("1,2")), ("odrive", s("3"))],
+        );
+        assert!(build_link("can_motors", &pp, "can_sim", &hp, cap()).is_ok());
+        let bad = params(Stage::Protocol, "can_motors", &[("models", s("2=ak99"))]);
+        assert!(matches!(
+            build_link("can_motors", &bad, "can_sim", &hp, cap()),
+            Err(BuildError::Open(m)) if m.contains("ak99")
+        ));
+    }
+
+    #[test]
+    fn os_resources_fail_with_a_message_not_a_panic() {
+        let s = |v: &str| ParamValue::Str(v.into());
+        let pp = params(Stage::Protocol, "dynamixel2", &[]);
+        let hp = params(
+            Stage::Hardware,
+            "serial",
+            &[("port", s("/dev/conductor-nonexistent"))],
+        );
+        match build_link("dynamixel2", &pp, "serial", &hp, cap()) {
+            Err(BuildError::Open(m)) => assert!(m.contains("/dev/conductor-nonexistent"), "{m}"),
+            other => panic!("{:?}", other.err()),
+        }
+        let pp = params(Stage::Protocol, "can_motors", &[]);
+        let hp = params(
+            Stage::Hardware,
+            "socketcan",
+            &[("interface", s("conductor-none0"))],
+        );
+        assert!(matches!(
+            build_link("can_motors", &pp, "socketcan", &hp, cap()),
+            Err(BuildError::Open(_))
+        ));
+        // A byte protocol on CAN hardware is refused before anything is opened.
+        let pp = params(Stage::Protocol, "dynamixel2", &[]);
+        assert!(matches!(
+            build_link("dynamixel2", &pp, "socketcan", &hp, cap()),
+            Err(BuildError::MediumMismatch { .. })
+        ));
+    }
+
+    #[test]
+    fn mit_model_choices_match_the_protocol_table() {
+        let names: Vec<&str> = crate::protocol::MIT_MODELS.iter().map(|m| m.0).collect();
+        assert_eq!(names, MIT_MODEL_NAMES);
+    }
+
+    #[test]
+    fn exclusive_resources_are_declared() {
+        for (kind, res) in [
+            ("serial", "port"),
+            ("slcan", "port"),
+            ("socketcan", "interface"),
+        ] {
+            let k = find(Stage::Hardware, kind).unwrap();
+            assert_eq!(k.resource, Some(res));
+            assert!(k
+                .params
+                .iter()
+                .any(|p| p.name == res && p.default.is_none()));
+        }
     }
 }

@@ -15,12 +15,23 @@
 //! Stages exchange work through fixed-capacity [`Bounded`] queues sized at start-up; nothing here
 //! allocates, locks or blocks once built. Components are chosen by `kind` in the manifest through
 //! [`kinds`], whose parameter specs also drive manifest validation.
+//!
+//! | Module | Contents |
+//! |---|---|
+//! | [`hw`] | transports: serial, UDP, SocketCAN, SLCAN, in-memory byte pipe and CAN bus |
+//! | [`protocol`] | protocol stages: Dynamixel 2.0 and 1.0 (bundling), CAN motors (MIT, ODrive) |
+//! | [`device`] | devices: Dynamixel X-series, Dynamixel 1.0 (AX/MX), MIT-mode motor, ODrive axis |
+//! | [`sim`] | simulators speaking the real wire protocols, fault injection, pty/UDP runners |
+//! | [`kinds`] | the manifest kinds, their parameters, and the factories |
 
 #![warn(missing_docs)]
 
+pub mod device;
+pub mod hw;
 pub mod kinds;
 mod message;
 mod outstanding;
+pub mod protocol;
 mod queue;
 pub mod sim;
 mod stage;

@@ -175,12 +175,20 @@ where
 {
     /// Binds `protocol` to `hardware` with room for `words` words each way per tick.
     pub fn new(protocol: P, hardware: H, words: usize) -> Self {
+        Self::with_fill(protocol, hardware, words, P::Word::default())
+    }
+}
+
+impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
+    /// As [`new`](Self::new), for word types without a `Default` (CAN frames): `fill`
+    /// initialises the receive buffer.
+    pub fn with_fill(protocol: P, hardware: H, words: usize, fill: P::Word) -> Self {
         Self {
             protocol,
             hardware,
             tx: Bounded::with_capacity(words),
             rx: Bounded::with_capacity(words),
-            rx_buf: vec![P::Word::default(); words],
+            rx_buf: vec![fill; words],
         }
     }
 

@@ -1,0 +1,318 @@
+//! `conductor-sim`: the bus simulators as a standalone process, so an executor (or any other
+//! program: DynamixelSDK, python-can) can open them like real hardware.
+//!
+//! ```text
+//! conductor-sim dxl   --pty-link /tmp/dxl0 --servos 6
+//! conductor-sim slcan --pty-link /tmp/can0 --mit 1,2,3 --odrive 4
+//! ```
+//!
+//! The first line on stdout is `ready <device> [link <path>]`. Then each line `stats` on stdin
+//! is answered with one JSON line of counters (and, for `dxl`, every servo's present and goal
+//! position); `quit` or end of input stops the simulator.
+
+use std::io::{BufRead, Write};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand};
+use conductor_devices::protocol::mit_limits;
+use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
+use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
+use conductor_devices::sim::fault::FaultConfig;
+use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty, Running};
+use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
+use conductor_protocols::slcan::Dialect;
+
+#[derive(Parser)]
+#[command(
+    name = "conductor-sim",
+    about = "Bus simulators speaking the real wire protocols"
+)]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Args)]
+struct Where {
+    /// Make a pseudo-terminal and put a symlink to it here (a stable path for manifests).
+    #[arg(long)]
+    pty_link: Option<PathBuf>,
+    /// Listen on UDP instead of a pty.
+    #[arg(long, conflicts_with = "pty_link")]
+    udp: Option<SocketAddr>,
+    /// Print the stats line every this many milliseconds (0: only on request).
+    #[arg(long, default_value_t = 0)]
+    stats_ms: u64,
+}
+
+#[derive(Args)]
+struct Faults {
+    /// Probability that a byte is corrupted (both directions).
+    #[arg(long, default_value_t = 0.0)]
+    corrupt: f64,
+    /// Probability that a byte is lost (both directions).
+    #[arg(long, default_value_t = 0.0)]
+    drop: f64,
+    /// Probability that a reply is delayed by --delay-us.
+    #[arg(long, default_value_t = 0.0)]
+    delay: f64,
+    /// Delay of a delayed reply (µs).
+    #[arg(long, default_value_t = 0)]
+    delay_us: u64,
+    /// Probability that a packet loses its tail.
+    #[arg(long, default_value_t = 0.0)]
+    truncate: f64,
+    /// Seed of the fault generator.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// A Dynamixel Protocol 2.0 bus of X-series servos.
+    Dxl {
+        #[command(flatten)]
+        at: Where,
+        /// Servos with IDs 1..=N.
+        #[arg(long, default_value_t = 6)]
+        servos: u8,
+        /// Explicit IDs instead (comma-separated).
+        #[arg(long, value_delimiter = ',')]
+        ids: Vec<u8>,
+        /// Line speed for reply timing.
+        #[arg(long, default_value_t = 1_000_000)]
+        baud: u32,
+        /// Return Delay Time (µs).
+        #[arg(long, default_value_t = 0)]
+        return_delay_us: u32,
+        /// Answer without the wire time of the replies.
+        #[arg(long)]
+        no_baud_timing: bool,
+        /// Time constant of the position response (s).
+        #[arg(long, default_value_t = 0.05)]
+        tau: f64,
+        #[command(flatten)]
+        faults: Faults,
+    },
+    /// An SLCAN USB-CAN adapter with MIT-mode motors and ODrive axes behind it.
+    Slcan {
+        #[command(flatten)]
+        at: Where,
+        /// MIT-mode motor IDs.
+        #[arg(long, value_delimiter = ',')]
+        mit: Vec<u8>,
+        /// ODrive node IDs.
+        #[arg(long, value_delimiter = ',')]
+        odrive: Vec<u8>,
+        /// MIT model (ranges): ak10-9, ak60-6, ak70-10, ak80-6, ak80-9, ak80-64, mini-cheetah.
+        #[arg(long, default_value = "ak80-9")]
+        model: String,
+        /// MIT motors send 8-byte replies (temperature, fault code).
+        #[arg(long)]
+        long_reply: bool,
+        /// SLCAN dialect: canable (CR acks, S7 = 750k) or lawicel (z acks, S7 = 800k).
+        #[arg(long, default_value = "canable")]
+        dialect: String,
+        /// ODrive heartbeat period (ms, 0 = off).
+        #[arg(long, default_value_t = 100)]
+        heartbeat_ms: u64,
+        /// ODrive encoder-estimate period (ms, 0 = off).
+        #[arg(long, default_value_t = 0)]
+        encoder_ms: u64,
+    },
+}
+
+fn endpoint(at: &Where) -> std::io::Result<(Endpoint, String)> {
+    Ok(match (&at.pty_link, at.udp) {
+        (_, Some(addr)) => {
+            let e = Endpoint::udp(addr)?;
+            let d = e.describe();
+            (e, d)
+        }
+        (link, None) => {
+            let pty = Pty::open(link.as_deref())?;
+            let mut d = pty.path().to_string();
+            if let Some(l) = pty.link() {
+                d.push_str(&format!(" link {}", l.display()));
+            }
+            (Endpoint::Pty(pty), d)
+        }
+    })
+}
+
+fn dxl_stats(sim: &DxlBusSim) -> String {
+    let s = sim.stats();
+    let ids = sim.ids();
+    let list = |f: &dyn Fn(u8) -> i32| {
+        ids.iter()
+            .map(|&id| f(id).to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    format!(
+        "{{\"bytes_in\": {}, \"packets_in\": {}, \"discarded_in\": {}, \"rejected_in\": {}, \
+         \"ping\": {}, \"read\": {}, \"write\": {}, \"sync_read\": {}, \"fast_sync_read\": {}, \
+         \"sync_write\": {}, \"sync_write_bytes\": {}, \"bulk_read\": {}, \"bulk_write\": {}, \
+         \"packets_out\": {}, \"bytes_out\": {}, \"ids\": [{}], \"present\": [{}], \"goal\": [{}]}}",
+        s.bytes_in,
+        s.packets_in,
+        s.discarded_in,
+        s.rejected_in,
+        s.ping,
+        s.read,
+        s.write,
+        s.sync_read,
+        s.fast_sync_read,
+        s.sync_write,
+        s.sync_write_bytes,
+        s.bulk_read,
+        s.bulk_write,
+        s.packets_out,
+        s.bytes_out,
+        ids.iter().map(|i| i.to_string()).collect::<Vec<_>>().join(","),
+        list(&|id| sim.servo(id).map_or(0, |s| s.present_position())),
+        list(&|id| sim.servo(id).map_or(0, |s| s.goal_position())),
+    )
+}
+
+fn slcan_stats(a: &SlcanAdapterSim) -> String {
+    let s = a.stats();
+    let nodes = a
+        .nodes()
+        .iter()
+        .map(|n| {
+            let s = n.snapshot();
+            format!(
+                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}}}",
+                s.id, s.position, s.enabled, s.frames_in
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ");
+    format!(
+        "{{\"bytes_in\": {}, \"commands\": {}, \"frames_from_host\": {}, \"frames_to_host\": {}, \
+         \"nacks\": {}, \"bytes_out\": {}, \"open\": {}, \"nodes\": [{}]}}",
+        s.bytes_in,
+        s.commands,
+        s.frames_from_host,
+        s.frames_to_host,
+        s.nacks,
+        s.bytes_out,
+        a.is_open(),
+        nodes
+    )
+}
+
+/// Serves `stats` requests on stdin until `quit` or end of input.
+fn serve<S: Send + 'static>(running: Running<S>, stats_ms: u64, line: fn(&S) -> String) {
+    let running = std::sync::Arc::new(running);
+    if stats_ms > 0 {
+        let r = running.clone();
+        std::thread::spawn(move || loop {
+            std::thread::sleep(std::time::Duration::from_millis(stats_ms));
+            let text = line(&r.sim());
+            let mut out = std::io::stdout().lock();
+            let _ = writeln!(out, "{text}");
+            let _ = out.flush();
+        });
+    }
+    for l in std::io::stdin().lock().lines() {
+        let Ok(l) = l else { break };
+        match l.trim() {
+            "stats" => {
+                let text = line(&running.sim());
+                let mut out = std::io::stdout().lock();
+                let _ = writeln!(out, "{text}");
+                let _ = out.flush();
+            }
+            "quit" => break,
+            _ => {}
+        }
+    }
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.cmd {
+        Cmd::Dxl {
+            at,
+            servos,
+            ids,
+            baud,
+            return_delay_us,
+            no_baud_timing,
+            tau,
+            faults: f,
+        } => endpoint(&at).map(|(ep, desc)| {
+            let cfg = DxlSimConfig {
+                ids: if ids.is_empty() {
+                    (1..=servos).collect()
+                } else {
+                    ids
+                },
+                baud,
+                return_delay_us,
+                baud_timing: !no_baud_timing,
+                tau_s: tau,
+                ..DxlSimConfig::default()
+            };
+            let faults = FaultConfig {
+                corrupt: f.corrupt,
+                drop: f.drop,
+                delay: f.delay,
+                delay_ns: f.delay_us * 1000,
+                truncate: f.truncate,
+                seed: f.seed,
+            };
+            let up = FaultConfig {
+                seed: f.seed ^ 0x5EED,
+                ..faults
+            };
+            let running = run_dxl(ep, cfg, faults, up);
+            println!("ready {desc}");
+            let _ = std::io::stdout().flush();
+            serve(running, at.stats_ms, dxl_stats);
+        }),
+        Cmd::Slcan {
+            at,
+            mit,
+            odrive,
+            model,
+            long_reply,
+            dialect,
+            heartbeat_ms,
+            encoder_ms,
+        } => {
+            let Some(limits) = mit_limits(&model) else {
+                eprintln!("conductor-sim: unknown MIT model {model:?}");
+                std::process::exit(2);
+            };
+            let dialect = match dialect.as_str() {
+                "canable" => Dialect::CANABLE,
+                "lawicel" => Dialect::LAWICEL,
+                other => {
+                    eprintln!("conductor-sim: unknown SLCAN dialect {other:?} (canable, lawicel)");
+                    std::process::exit(2);
+                }
+            };
+            endpoint(&at).map(|(ep, desc)| {
+                let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
+                for id in mit {
+                    nodes.push(Box::new(MitMotorSim::new(id, limits, 0, long_reply)));
+                }
+                for n in odrive {
+                    nodes.push(Box::new(OdriveAxisSim::new(n, heartbeat_ms, encoder_ms)));
+                }
+                let running = run_slcan(ep, SlcanAdapterSim::new(dialect, nodes));
+                println!("ready {desc}");
+                let _ = std::io::stdout().flush();
+                serve(running, at.stats_ms, slcan_stats);
+            })
+        }
+    };
+    if let Err(e) = result {
+        eprintln!("conductor-sim: {e}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,276 @@
+//! SLCAN (LAWICEL) USB-CAN adapters — CANable, CANUSB, CAN232 and clones — spoken in user
+//! space over any byte transport (a serial port, a pty, an in-memory pipe).
+//!
+//! Frames go out as `t…\r` lines; the adapter acknowledges each command with CR (or `z`/`Z`)
+//! or BEL, interleaved with the frames it received from the bus. Acknowledgements are matched
+//! to commands in order ([`PendingAcks`]); refused and unacknowledged frames are counted.
+
+use std::time::{Duration, Instant};
+
+use conductor_protocols::can::CanFrame;
+use conductor_protocols::slcan::{
+    open_sequence, Bitrate, Command, CommandKind, Dialect, HostScanner, PendingAcks, Response,
+    MAX_FRAME_LINE,
+};
+
+use crate::queue::Bounded;
+use crate::stage::{Hardware, HwError, TickCtx};
+
+/// How to talk to the adapter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SlcanOptions {
+    /// CAN bitrate (`Sn`).
+    pub bitrate: Bitrate,
+    /// Which SLCAN variant the adapter speaks (meaning of `S7`).
+    pub dialect: Dialect,
+    /// A frame not acknowledged within this time is counted as lost.
+    pub ack_timeout: Duration,
+    /// How long [`SlcanHardware::open`] waits for the adapter to answer the open sequence.
+    pub open_timeout: Duration,
+}
+
+impl Default for SlcanOptions {
+    fn default() -> Self {
+        Self {
+            bitrate: Bitrate::M1,
+            dialect: Dialect::CANABLE,
+            ack_timeout: Duration::from_millis(100),
+            open_timeout: Duration::from_secs(2),
+        }
+    }
+}
+
+/// Counters of an SLCAN link.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SlcanStats {
+    /// Frames handed to the adapter.
+    pub frames_out: u64,
+    /// Frames received from the bus.
+    pub frames_in: u64,
+    /// Commands the adapter refused (BEL).
+    pub nacks: u64,
+    /// Frames never acknowledged within the timeout.
+    pub ack_timeouts: u64,
+    /// Acknowledgements with no command waiting for them.
+    pub stray_acks: u64,
+    /// Bytes from the adapter that were not a valid line.
+    pub discarded_bytes: u64,
+}
+
+/// Why the adapter could not be opened.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SlcanOpenError {
+    /// The transport failed.
+    #[error("transport: {0}")]
+    Transport(#[from] HwError),
+    /// The bitrate cannot be expressed in the dialect (`S7`).
+    #[error("bitrate {0:?} has no Sn code in this SLCAN dialect")]
+    Bitrate(Bitrate),
+    /// The adapter did not acknowledge the open sequence in time.
+    #[error("the adapter did not answer the open sequence (C, S, O) within {0:?}")]
+    NoAnswer(Duration),
+    /// The adapter refused to open the channel.
+    #[error("the adapter refused to open the channel (BEL)")]
+    Refused,
+}
+
+/// Most frames in flight (sent, not yet acknowledged).
+const ACK_WINDOW: usize = 64;
+/// Bytes read from the transport per call.
+const RX_CHUNK: usize = 512;
+
+/// An SLCAN adapter on byte transport `B`.
+pub struct SlcanHardware<B: Hardware<Word = u8>> {
+    port: B,
+    opts: SlcanOptions,
+    scanner: HostScanner<64>,
+    acks: PendingAcks<ACK_WINDOW>,
+    /// Encoded lines not yet accepted by the transport.
+    tx: Bounded<u8>,
+    /// Frames decoded but not yet handed out.
+    rx: Bounded<CanFrame>,
+    rx_chunk: [u8; RX_CHUNK],
+    stats: SlcanStats,
+    t0: Instant,
+}
+
+impl<B: Hardware<Word = u8>> SlcanHardware<B> {
+    /// Sends the open sequence (`C`, `Sn`, `O`) and waits, blocking up to
+    /// `opts.open_timeout`, for the adapter's three answers (the first, closing a closed
+    /// channel, may be a BEL). Call at start-up, not on the real-time thread.
+    pub fn open(mut port: B, opts: SlcanOptions) -> Result<Self, SlcanOpenError> {
+        let mut seq = [0u8; 16];
+        let n = open_sequence(opts.bitrate, false, &opts.dialect, &mut seq)
+            .map_err(|_| SlcanOpenError::Bitrate(opts.bitrate))?;
+        let t0 = Instant::now();
+        let ctx = TickCtx { tick: 0, now_ns: 0 };
+        let mut sent = 0;
+        let mut scanner = HostScanner::<64>::new();
+        let mut answers = [None::<bool>; 3];
+        let mut got = 0;
+        let mut buf = [0u8; 256];
+        let mut rx = Bounded::with_capacity(256);
+        while got < 3 {
+            if t0.elapsed() > opts.open_timeout {
+                return Err(SlcanOpenError::NoAnswer(opts.open_timeout));
+            }
+            if sent < n {
+                sent += port.transmit(&seq[sent..n], ctx)?;
+            }
+            let k = port.receive(&mut buf, ctx)?;
+            scanner.feed(&buf[..k], |r| match r {
+                Response::Ok | Response::TxAck { .. } if got < 3 => {
+                    answers[got] = Some(true);
+                    got += 1;
+                }
+                Response::Error if got < 3 => {
+                    answers[got] = Some(false);
+                    got += 1;
+                }
+                Response::Frame { frame, .. } => {
+                    let _ = rx.push(frame);
+                }
+                _ => {}
+            });
+            if k == 0 {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        }
+        // The answer to `O` decides; `C` on a closed channel may legitimately be refused.
+        if answers[2] != Some(true) {
+            return Err(SlcanOpenError::Refused);
+        }
+        let mut hw = Self {
+            port,
+            opts,
+            scanner,
+            acks: PendingAcks::new(),
+            tx: Bounded::with_capacity(ACK_WINDOW * MAX_FRAME_LINE),
+            rx: Bounded::with_capacity(256),
+            rx_chunk: [0; RX_CHUNK],
+            stats: SlcanStats::default(),
+            t0,
+        };
+        for f in rx.as_slice() {
+            let _ = hw.rx.push(*f);
+        }
+        Ok(hw)
+    }
+
+    /// Counters since opening.
+    pub fn stats(&self) -> SlcanStats {
+        SlcanStats {
+            discarded_bytes: self.scanner.stats().discarded_bytes(),
+            ..self.stats
+        }
+    }
+
+    /// The underlying transport.
+    pub fn port(&self) -> &B {
+        &self.port
+    }
+
+    fn now_us(&self) -> u32 {
+        // Wrapping microseconds: ack ages are compared with wrapping arithmetic.
+        self.t0.elapsed().as_micros() as u32
+    }
+
+    fn flush_tx(&mut self, ctx: TickCtx) -> Result<(), HwError> {
+        if !self.tx.is_empty() {
+            let n = self.port.transmit(self.tx.as_slice(), ctx)?;
+            self.tx.consume(n);
+        }
+        Ok(())
+    }
+
+    fn expire_acks(&mut self) {
+        let now = self.now_us();
+        let limit = self.opts.ack_timeout.as_micros() as u32;
+        while let Some((_, sent)) = self.acks.front() {
+            if now.wrapping_sub(sent) <= limit {
+                break;
+            }
+            self.acks.pop();
+            self.stats.ack_timeouts += 1;
+        }
+    }
+}
+
+impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
+    type Word = CanFrame;
+
+    fn transmit(&mut self, words: &[CanFrame], ctx: TickCtx) -> Result<usize, HwError> {
+        self.expire_acks();
+        let now = self.now_us();
+        let mut line = [0u8; MAX_FRAME_LINE];
+        let mut accepted = 0;
+        for f in words {
+            let Ok(n) = Command::Transmit(*f).encode(&self.opts.dialect, &mut line) else {
+                break;
+            };
+            if self.tx.remaining() < n || self.acks.len() == ACK_WINDOW {
+                break;
+            }
+            self.tx.extend_from_slice(&line[..n]);
+            let _ = self.acks.push(CommandKind::Transmit, now);
+            accepted += 1;
+        }
+        self.stats.frames_out += accepted as u64;
+        self.flush_tx(ctx)?;
+        Ok(accepted)
+    }
+
+    fn receive(&mut self, out: &mut [CanFrame], ctx: TickCtx) -> Result<usize, HwError> {
+        self.flush_tx(ctx)?;
+        loop {
+            let k = self.port.receive(&mut self.rx_chunk, ctx)?;
+            if k == 0 {
+                break;
+            }
+            let Self {
+                scanner,
+                acks,
+                rx,
+                stats,
+                rx_chunk,
+                ..
+            } = self;
+            scanner.feed(&rx_chunk[..k], |r| match r {
+                Response::Frame { frame, .. } => {
+                    stats.frames_in += 1;
+                    let _ = rx.push(frame);
+                }
+                other => match acks.resolve(&other) {
+                    Some(a) if !a.ok => stats.nacks += 1,
+                    Some(_) => {}
+                    None if matches!(
+                        other,
+                        Response::Ok | Response::Error | Response::TxAck { .. }
+                    ) =>
+                    {
+                        stats.stray_acks += 1
+                    }
+                    None => {}
+                },
+            });
+            if k < RX_CHUNK {
+                break;
+            }
+        }
+        self.expire_acks();
+        let n = out.len().min(self.rx.len());
+        out[..n].copy_from_slice(&self.rx.as_slice()[..n]);
+        self.rx.consume(n);
+        Ok(n)
+    }
+
+    fn shutdown(&mut self) {
+        let ctx = TickCtx { tick: 0, now_ns: 0 };
+        let _ = self.flush_tx(ctx);
+        let mut close = [0u8; 4];
+        if let Ok(n) = Command::Close.encode(&self.opts.dialect, &mut close) {
+            let _ = self.port.transmit(&close[..n], ctx);
+        }
+        self.port.shutdown();
+    }
+}

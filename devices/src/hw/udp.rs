@@ -1,0 +1,136 @@
+//! UDP: a byte stream carried in datagrams, for serial-over-network bridges and simulators
+//! running on another machine.
+
+use std::io;
+use std::net::{SocketAddr, UdpSocket};
+
+use crate::stage::{Hardware, HwError, TickCtx};
+
+/// Largest datagram accepted.
+const MAX_DATAGRAM: usize = 2048;
+
+/// A connected, non-blocking UDP socket. Each `transmit` sends one datagram (split at 1472
+/// bytes, a safe Ethernet payload); received datagrams are concatenated into the byte stream.
+pub struct UdpHardware {
+    socket: UdpSocket,
+    peer: SocketAddr,
+    /// A datagram only partly handed out (`out` was smaller than it).
+    held: [u8; MAX_DATAGRAM],
+    held_len: usize,
+    held_pos: usize,
+}
+
+impl std::fmt::Debug for UdpHardware {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("UdpHardware")
+            .field("peer", &self.peer)
+            .finish()
+    }
+}
+
+/// Payload per datagram.
+const MTU_PAYLOAD: usize = 1472;
+
+impl UdpHardware {
+    /// Binds `local` and talks to `peer` only (datagrams from elsewhere are dropped by the OS).
+    pub fn open(local: SocketAddr, peer: SocketAddr) -> io::Result<Self> {
+        let socket = UdpSocket::bind(local)?;
+        socket.connect(peer)?;
+        socket.set_nonblocking(true)?;
+        Ok(Self {
+            socket,
+            peer,
+            held: [0; MAX_DATAGRAM],
+            held_len: 0,
+            held_pos: 0,
+        })
+    }
+
+    /// The bound local address.
+    pub fn local_addr(&self) -> io::Result<SocketAddr> {
+        self.socket.local_addr()
+    }
+}
+
+fn hw_error(e: io::Error) -> HwError {
+    HwError::Io(e.to_string())
+}
+
+impl Hardware for UdpHardware {
+    type Word = u8;
+
+    fn transmit(&mut self, words: &[u8], _ctx: TickCtx) -> Result<usize, HwError> {
+        let mut sent = 0;
+        for chunk in words.chunks(MTU_PAYLOAD) {
+            match self.socket.send(chunk) {
+                Ok(n) => sent += n,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                // Nobody listening (ICMP port unreachable from an earlier send): the bytes are
+                // gone, as on a serial line with nothing attached.
+                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => sent += chunk.len(),
+                Err(e) => return Err(hw_error(e)),
+            }
+        }
+        Ok(sent)
+    }
+
+    fn receive(&mut self, out: &mut [u8], _ctx: TickCtx) -> Result<usize, HwError> {
+        let mut n = 0;
+        loop {
+            if self.held_pos < self.held_len {
+                let k = (self.held_len - self.held_pos).min(out.len() - n);
+                out[n..n + k].copy_from_slice(&self.held[self.held_pos..self.held_pos + k]);
+                self.held_pos += k;
+                n += k;
+            }
+            if n == out.len() {
+                return Ok(n);
+            }
+            match self.socket.recv(&mut self.held) {
+                Ok(k) => {
+                    self.held_len = k;
+                    self.held_pos = 0;
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => return Ok(n),
+                Err(e) if e.kind() == io::ErrorKind::ConnectionRefused => return Ok(n),
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                Err(e) => return Err(hw_error(e)),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn datagrams_become_a_byte_stream() {
+        let any: SocketAddr = "127.0.0.1:0".parse().unwrap();
+        let peer = UdpSocket::bind(any).unwrap();
+        let mut hw = UdpHardware::open(any, peer.local_addr().unwrap()).unwrap();
+        peer.connect(hw.local_addr().unwrap()).unwrap();
+        let ctx = TickCtx { tick: 0, now_ns: 0 };
+        let mut out = [0u8; 4];
+        assert_eq!(hw.receive(&mut out, ctx).unwrap(), 0, "nothing pending");
+        assert_eq!(hw.transmit(&[1, 2, 3], ctx).unwrap(), 3);
+        let mut buf = [0u8; 16];
+        assert_eq!(peer.recv(&mut buf).unwrap(), 3);
+        peer.send(&[10, 11, 12]).unwrap();
+        peer.send(&[13, 14]).unwrap();
+        let mut got = Vec::new();
+        for _ in 0..1000 {
+            let k = hw.receive(&mut out, ctx).unwrap();
+            got.extend_from_slice(&out[..k]);
+            if got.len() == 5 {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        assert_eq!(
+            got,
+            [10, 11, 12, 13, 14],
+            "split across a small buffer, in order"
+        );
+    }
+}

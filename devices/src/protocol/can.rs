@@ -1,0 +1,277 @@
+//! The CAN motor stage: MIT-mode motors and ODrive axes on one classic CAN bus (SocketCAN or
+//! SLCAN). Every request of a tick becomes one frame and the tick's frames go out together;
+//! replies are matched to requests by the motor ID in the payload (MIT) or the node ID in the
+//! arbitration ID (ODrive).
+
+use conductor_protocols::can::CanFrame;
+use conductor_protocols::mit_can::{self, Command, Limits, Model, SpecialCommand};
+use conductor_protocols::odrive_can::{self, CmdId, Message};
+use embedded_can::{Frame, Id, StandardId};
+
+use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request};
+use crate::outstanding::{Outstanding, Pending};
+use crate::queue::Bounded;
+use crate::stage::{Protocol, ProtocolCounters, TickCtx};
+
+/// The MIT-mode model names the manifest accepts, with their ranges.
+pub const MIT_MODELS: &[(&str, Model)] = &[
+    ("ak10-9", Model::Ak10_9),
+    ("ak60-6", Model::Ak60_6),
+    ("ak70-10", Model::Ak70_10),
+    ("ak80-6", Model::Ak80_6),
+    ("ak80-9", Model::Ak80_9),
+    ("ak80-64", Model::Ak80_64),
+    ("mini-cheetah", Model::MiniCheetah),
+];
+
+/// Ranges of a model name from [`MIT_MODELS`].
+pub fn mit_limits(name: &str) -> Option<Limits> {
+    MIT_MODELS
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, m)| m.limits())
+}
+
+/// Why a per-motor model table does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("bad MIT model table entry {0:?}: expected \"<id>=<model>\" with a model from {models}", models = MIT_MODELS.iter().map(|m| m.0).collect::<Vec<_>>().join(", "))]
+pub struct ModelTableError(pub String);
+
+/// Parses `"1=ak80-9,2=ak10-9"` (empty string: no overrides).
+pub fn parse_model_table(s: &str) -> Result<Vec<(u8, Limits)>, ModelTableError> {
+    s.split(',')
+        .map(str::trim)
+        .filter(|e| !e.is_empty())
+        .map(|e| {
+            let (id, model) = e.split_once('=').ok_or_else(|| ModelTableError(e.into()))?;
+            let id: u8 = id.trim().parse().map_err(|_| ModelTableError(e.into()))?;
+            let l = mit_limits(model.trim()).ok_or_else(|| ModelTableError(e.into()))?;
+            Ok((id, l))
+        })
+        .collect()
+}
+
+/// ODrive messages that are requested with a remote frame and answered by the axis.
+fn is_get(cmd: CmdId) -> bool {
+    matches!(
+        cmd,
+        CmdId::GetVersion
+            | CmdId::Heartbeat
+            | CmdId::GetError
+            | CmdId::GetEncoderEstimates
+            | CmdId::GetIq
+            | CmdId::GetTemperature
+            | CmdId::GetBusVoltageCurrent
+            | CmdId::GetTorques
+            | CmdId::GetPowers
+    )
+}
+
+fn special(s: MitSpecial) -> SpecialCommand {
+    match s {
+        MitSpecial::Enter => SpecialCommand::Enter,
+        MitSpecial::Exit => SpecialCommand::Exit,
+        MitSpecial::Zero => SpecialCommand::Zero,
+    }
+}
+
+/// MIT-mode and ODrive protocol stage. Word = [`CanFrame`].
+#[derive(Debug)]
+pub struct CanMotorProtocol {
+    default_limits: Limits,
+    limits: Vec<(u8, Limits)>,
+    master: StandardId,
+    timeout_ns: u64,
+    pending: Outstanding,
+    counters: ProtocolCounters,
+    unsolicited: u64,
+}
+
+impl CanMotorProtocol {
+    /// A stage whose MIT motors use `default_limits` unless listed in `per_motor`; MIT replies
+    /// arrive on `master_id`; a request unanswered after `timeout_ns` is missing.
+    pub fn new(
+        default_limits: Limits,
+        per_motor: Vec<(u8, Limits)>,
+        master_id: u16,
+        timeout_ns: u64,
+        in_flight: usize,
+    ) -> Self {
+        Self {
+            default_limits,
+            limits: per_motor,
+            // IDs above 0x7FF are refused by the manifest's range check.
+            master: StandardId::new(master_id).unwrap_or(StandardId::ZERO),
+            timeout_ns,
+            pending: Outstanding::with_capacity(in_flight.max(1)),
+            counters: ProtocolCounters::default(),
+            unsolicited: 0,
+        }
+    }
+
+    fn limits_of(&self, motor: u8) -> Limits {
+        self.limits
+            .iter()
+            .find(|(id, _)| *id == motor)
+            .map_or(self.default_limits, |(_, l)| *l)
+    }
+
+    /// Valid frames nobody asked for and no device stage can use.
+    pub fn unsolicited(&self) -> u64 {
+        self.unsolicited
+    }
+
+    fn frame_for(&self, r: &Request) -> Option<(CanFrame, bool)> {
+        let id = u16::try_from(r.cred.id).ok()?;
+        match r.op {
+            Op::Mit { p, v, kp, kd, t } => {
+                let l = self.limits_of(u8::try_from(id).ok()?);
+                let cmd = Command { p, v, kp, kd, t };
+                mit_can::command_frame(id, &cmd, &l).ok().map(|f| (f, true))
+            }
+            Op::MitSpecial(s) => mit_can::special_frame(id, special(s))
+                .ok()
+                .map(|f| (f, true)),
+            Op::Odrive(msg) => {
+                let node = u8::try_from(id).ok()?;
+                if is_get(msg.cmd_id()) {
+                    odrive_can::request_frame(node, msg.cmd_id())
+                        .ok()
+                        .map(|f| (f, true))
+                } else {
+                    odrive_can::frame(node, &msg).ok().map(|f| (f, false))
+                }
+            }
+            _ => None,
+        }
+    }
+
+    fn on_frame(&mut self, f: &CanFrame, ctx: TickCtx, out: &mut Bounded<Reply>) {
+        // MIT reply: from the master ID, motor ID in data[0].
+        if f.id() == Id::Standard(self.master) && !f.is_remote_frame() && matches!(f.dlc(), 6 | 8) {
+            let motor = f.data()[0];
+            let cred = Credential::id(motor as u32);
+            let is_mit = |op: &Op| matches!(op, Op::Mit { .. } | Op::MitSpecial(_));
+            if let Some(p) = self.pending.resolve(cred, is_mit) {
+                let l = self.limits_of(motor);
+                match mit_can::Reply::decode(f.data(), &l) {
+                    Ok(rep) => {
+                        self.counters.packets_in += 1;
+                        if let Some(fault) = rep.extra.and_then(|e| e.fault) {
+                            self.counters.device_errors += 1;
+                            let _ = out.push(Reply {
+                                cred,
+                                data: ReplyData::DeviceError {
+                                    code: fault.code() as u32,
+                                },
+                                tick: p.tick,
+                                t_sample_ns: p.t_request_ns,
+                            });
+                        }
+                        let _ = out.push(Reply {
+                            cred,
+                            data: ReplyData::Mit {
+                                p: rep.p,
+                                v: rep.v,
+                                t: rep.t,
+                            },
+                            tick: p.tick,
+                            t_sample_ns: p.t_request_ns,
+                        });
+                    }
+                    Err(_) => {
+                        self.counters.rejected_packets += 1;
+                        let _ = out.push(Reply {
+                            cred,
+                            data: ReplyData::Missing { op: p.op },
+                            tick: p.tick,
+                            t_sample_ns: p.t_request_ns,
+                        });
+                    }
+                }
+                return;
+            }
+        }
+        match odrive_can::decode_frame(f) {
+            Ok((node, msg)) => {
+                let cred = Credential::id(node as u32);
+                let cmd = msg.cmd_id();
+                let asked = self
+                    .pending
+                    .resolve(cred, |op| matches!(op, Op::Odrive(m) if m.cmd_id() == cmd));
+                self.counters.packets_in += 1;
+                // Cyclic messages (heartbeat, encoder estimates) arrive unasked: they are
+                // sampled when received.
+                let (tick, t_sample_ns) = match asked {
+                    Some(p) => (p.tick, p.t_request_ns),
+                    None => (ctx.tick, ctx.now_ns),
+                };
+                let _ = out.push(Reply {
+                    cred,
+                    data: ReplyData::Odrive(msg),
+                    tick,
+                    t_sample_ns,
+                });
+            }
+            Err(_) => self.unsolicited += 1,
+        }
+    }
+}
+
+impl Protocol for CanMotorProtocol {
+    type Word = CanFrame;
+
+    fn encode(&mut self, requests: &[Request], out: &mut Bounded<CanFrame>, ctx: TickCtx) {
+        for r in requests {
+            let Some((frame, answered)) = self.frame_for(r) else {
+                self.counters.dropped_requests += 1;
+                continue;
+            };
+            if answered
+                && !self.pending.track(Pending {
+                    cred: r.cred,
+                    op: r.op,
+                    tick: r.tick,
+                    t_request_ns: r.t_request_ns,
+                    deadline_ns: ctx.now_ns + self.timeout_ns,
+                })
+            {
+                self.counters.dropped_requests += 1;
+                continue;
+            }
+            if out.push(frame).is_err() {
+                self.counters.dropped_requests += 1;
+                if answered {
+                    // Forget it again: it never went out.
+                    let op = r.op;
+                    let _ = self.pending.resolve(r.cred, |o| *o == op);
+                }
+                continue;
+            }
+            self.counters.packets_out += 1;
+            self.counters.words_out += 1;
+        }
+    }
+
+    fn decode(&mut self, words: &[CanFrame], out: &mut Bounded<Reply>, ctx: TickCtx) {
+        for f in words {
+            self.counters.words_in += 1;
+            self.on_frame(f, ctx, out);
+        }
+    }
+
+    fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
+        self.counters.missing_replies += self.pending.expire(ctx.now_ns, out);
+    }
+
+    fn counters(&self) -> ProtocolCounters {
+        let mut c = self.counters;
+        c.rejected_packets += self.unsolicited;
+        c
+    }
+}
+
+/// An ODrive "get" message for `cmd`, with zeroed fields (the request carries no data).
+pub fn odrive_get(cmd: CmdId) -> Option<Message> {
+    Message::decode(cmd, &[0; 8]).ok().filter(|_| is_get(cmd))
+}

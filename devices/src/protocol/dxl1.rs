@@ -1,0 +1,323 @@
+//! The Dynamixel Protocol 1.0 stage (AX-12, MX on Protocol 1.0 firmware, RX): a tick's writes
+//! become SYNC WRITEs (one per register); reads become one BULK READ (MX series) or, for
+//! servos without it (AX), one READ per bus window, round robin over the devices.
+
+use conductor_protocols::dynamixel1::{self as dxl, BulkReadEntry, ErrorBits, Scanner, Status};
+
+use super::register::{Core, Entry, StatusErr, Timing};
+use crate::message::{Reply, Request};
+use crate::queue::Bounded;
+use crate::stage::{Protocol, ProtocolCounters, TickCtx};
+
+/// How the stage reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dxl1ReadMode {
+    /// BULK READ: one instruction, one status packet per device (MX series only).
+    Bulk,
+    /// One READ per bus window (AX series): each device is read every N-th window.
+    Single,
+}
+
+/// Dynamixel 1.0 protocol stage. Word = byte.
+pub struct Dxl1Protocol {
+    core: Core,
+    mode: Dxl1ReadMode,
+    scanner: Box<Scanner<512>>,
+    pkt: Vec<u8>,
+    group: Vec<(u8, i64)>,
+    data: Vec<(u8, [u8; 4])>,
+    entries: Vec<Entry>,
+    unsolicited: u64,
+}
+
+impl std::fmt::Debug for Dxl1Protocol {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Dxl1Protocol")
+            .field("mode", &self.mode)
+            .finish()
+    }
+}
+
+/// Bits meaning the instruction was not carried out (its data is not to be trusted).
+const FAILED: u8 = ErrorBits::INSTRUCTION | ErrorBits::CHECKSUM | ErrorBits::RANGE;
+
+impl Dxl1Protocol {
+    /// A stage for up to `devices` servos and `in_flight` read requests.
+    pub fn new(timing: Timing, mode: Dxl1ReadMode, devices: usize, in_flight: usize) -> Self {
+        let devices = devices.clamp(1, 254);
+        Self {
+            core: Core::new(timing, dxl::MAX_DEVICE_ID, devices, in_flight),
+            mode,
+            scanner: Box::new(Scanner::new()),
+            pkt: vec![0; dxl::MAX_PACKET],
+            group: Vec::with_capacity(devices),
+            data: Vec::with_capacity(devices),
+            entries: Vec::with_capacity(devices),
+            unsolicited: 0,
+        }
+    }
+
+    fn emit(&mut self, n: usize, out: &mut Bounded<u8>) -> bool {
+        if out.remaining() < n {
+            return false;
+        }
+        out.extend_from_slice(&self.pkt[..n]);
+        self.core.counters.packets_out += 1;
+        self.core.counters.words_out += n as u64;
+        true
+    }
+}
+
+impl Protocol for Dxl1Protocol {
+    type Word = u8;
+
+    fn encode(&mut self, requests: &[Request], out: &mut Bounded<u8>, ctx: TickCtx) {
+        self.core.absorb(requests);
+        if !self.core.has_work() || !self.core.bus_free(ctx.now_ns) {
+            return;
+        }
+        while let Some((addr, len)) = self.core.take_write_group(&mut self.group) {
+            self.data.clear();
+            for &(id, v) in &self.group {
+                self.data.push((id, (v as u32).to_le_bytes()));
+            }
+            let l = len as usize;
+            let res = u8::try_from(addr).ok().map(|a| {
+                dxl::sync_write(
+                    &mut self.pkt,
+                    a,
+                    len,
+                    self.data.iter().map(|(id, b)| (*id, &b[..l])),
+                )
+            });
+            match res {
+                Some(Ok(n)) if self.emit(n, out) => self.core.occupy(ctx.now_ns, n),
+                _ => self.core.drop_writes(self.group.len()),
+            }
+        }
+        let single = self.mode == Dxl1ReadMode::Single;
+        if self.core.plan_reads(single, &mut self.entries).is_none() {
+            return;
+        }
+        let fits = self
+            .entries
+            .iter()
+            .all(|e| e.addr <= 255 && e.len <= 255 && e.len > 0);
+        let res = if !fits {
+            None
+        } else if single {
+            let e = self.entries[0];
+            Some(dxl::read(&mut self.pkt, e.id, e.addr as u8, e.len as u8))
+        } else {
+            Some(dxl::bulk_read(
+                &mut self.pkt,
+                self.entries.iter().map(|e| BulkReadEntry {
+                    len: e.len as u8,
+                    id: e.id,
+                    addr: e.addr as u8,
+                }),
+            ))
+        };
+        let entries = std::mem::take(&mut self.entries);
+        match res {
+            Some(Ok(n)) if self.emit(n, out) => {
+                // Status: FF FF ID LEN ERR data… CHK.
+                let reply: usize = entries.iter().map(|e| 6 + e.len as usize).sum();
+                self.core
+                    .start_txn(&entries, false, ctx.now_ns, n, reply, entries.len());
+            }
+            _ => self.core.abandon_reads(&entries),
+        }
+        self.entries = entries;
+    }
+
+    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, ctx: TickCtx) {
+        self.core.counters.words_in += words.len() as u64;
+        let Self {
+            core,
+            scanner,
+            unsolicited,
+            ..
+        } = self;
+        scanner.feed(words, |p| {
+            let s = Status::from_packet(&p);
+            let err = StatusErr {
+                failed: s.error.0 & FAILED != 0,
+                alert: s.error.0 & !FAILED != 0,
+                code: s.error.0,
+            };
+            if !core.on_status(s.id, err, s.data, ctx, out) {
+                *unsolicited += 1;
+            }
+        });
+    }
+
+    fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
+        let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
+        if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
+            let Self {
+                core,
+                scanner,
+                unsolicited,
+                ..
+            } = self;
+            scanner.expire_with(|p| {
+                let s = Status::from_packet(&p);
+                let err = StatusErr {
+                    failed: s.error.0 & FAILED != 0,
+                    alert: s.error.0 & !FAILED != 0,
+                    code: s.error.0,
+                };
+                if !core.on_status(s.id, err, s.data, ctx, out) {
+                    *unsolicited += 1;
+                }
+            });
+        }
+        self.core.expire(ctx.now_ns, out);
+    }
+
+    fn counters(&self) -> ProtocolCounters {
+        let s = self.scanner.stats();
+        let mut c = self.core.counters;
+        c.discarded_words = s.discarded_bytes();
+        c.rejected_packets += s.rejected_packets() + self.unsolicited;
+        c
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::message::{Credential, Op, ReplyData};
+
+    fn req(id: u32, op: Op, tick: u64) -> Request {
+        Request {
+            cred: Credential::id(id),
+            op,
+            tick,
+            t_request_ns: tick * 1_000_000,
+        }
+    }
+
+    fn ctx(tick: u64) -> TickCtx {
+        TickCtx {
+            tick,
+            now_ns: tick * 1_000_000,
+        }
+    }
+
+    /// A status packet from servo `id` (what an AX/MX sends).
+    fn status(id: u8, err: u8, data: &[u8]) -> Vec<u8> {
+        let mut b = [0u8; 64];
+        let n = dxl::status(&mut b, id, ErrorBits(err), data).unwrap();
+        b[..n].to_vec()
+    }
+
+    #[test]
+    fn sync_write_and_bulk_read_then_matched_replies() {
+        let timing = Timing {
+            baud: 1_000_000,
+            return_delay_ns: 0,
+            timeout_ns: 500_000,
+        };
+        let mut p = Dxl1Protocol::new(timing, Dxl1ReadMode::Bulk, 4, 16);
+        let reqs = [
+            req(
+                1,
+                Op::Write {
+                    addr: 30,
+                    len: 2,
+                    value: 512,
+                },
+                0,
+            ),
+            req(
+                2,
+                Op::Write {
+                    addr: 30,
+                    len: 2,
+                    value: 512,
+                },
+                0,
+            ),
+            req(1, Op::Read { addr: 36, len: 2 }, 0),
+            req(2, Op::Read { addr: 36, len: 2 }, 0),
+        ];
+        let mut out = Bounded::with_capacity(256);
+        p.encode(&reqs, &mut out, ctx(0));
+        // protocols.md §1.11: SYNC WRITE goal 512 to ids 1, 2.
+        let sync_write = [
+            0xFF, 0xFF, 0xFE, 0x0A, 0x83, 0x1E, 0x02, 0x01, 0x00, 0x02, 0x02, 0x00, 0x02, 0x4D,
+        ];
+        assert_eq!(&out.as_slice()[..14], &sync_write);
+        let (bulk, n) = dxl::parse(&out.as_slice()[14..]).unwrap();
+        assert_eq!(14 + n, out.len(), "exactly two packets");
+        assert_eq!((bulk.id, bulk.code), (0xFE, 0x92));
+        assert_eq!(bulk.params, &[0x00, 2, 1, 36, 2, 2, 36]);
+        let mut replies = Bounded::with_capacity(16);
+        let mut wire = status(1, 0, &[0x00, 0x02]);
+        // Servo 2 is overloaded: an alarm bit, the data still valid.
+        wire.extend(status(2, ErrorBits::OVERLOAD, &[0x10, 0x01]));
+        p.decode(&wire, &mut replies, ctx(1));
+        p.expire(&mut replies, ctx(1));
+        let r = replies.as_slice();
+        assert_eq!(r.len(), 3, "{r:?}");
+        assert_eq!(
+            r[0].data,
+            ReplyData::Register {
+                addr: 36,
+                len: 2,
+                value: 512
+            }
+        );
+        assert_eq!(r[1].data, ReplyData::DeviceError { code: 0x20 });
+        assert_eq!(
+            r[2].data,
+            ReplyData::Register {
+                addr: 36,
+                len: 2,
+                value: 0x110
+            }
+        );
+        let c = p.counters();
+        assert_eq!(
+            (c.packets_in, c.device_errors, c.missing_replies),
+            (2, 1, 0)
+        );
+    }
+
+    #[test]
+    fn single_mode_reads_one_servo_per_window_and_keeps_the_others_queued() {
+        let timing = Timing {
+            baud: 1_000_000,
+            return_delay_ns: 0,
+            timeout_ns: 200_000,
+        };
+        let mut p = Dxl1Protocol::new(timing, Dxl1ReadMode::Single, 4, 16);
+        let mut out = Bounded::with_capacity(256);
+        let mut replies = Bounded::with_capacity(16);
+        let reads = [
+            req(1, Op::Read { addr: 36, len: 2 }, 0),
+            req(2, Op::Read { addr: 36, len: 2 }, 0),
+        ];
+        p.encode(&reads, &mut out, ctx(0));
+        let (pk, _) = dxl::parse(out.as_slice()).unwrap();
+        assert_eq!((pk.id, pk.code, pk.params), (1, 0x02, &[36u8, 2][..]));
+        p.decode(&status(1, 0, &[1, 0]), &mut replies, ctx(1));
+        p.expire(&mut replies, ctx(1));
+        assert_eq!(replies.len(), 1);
+        // Next window: servo 2, whose request waited (no new requests needed).
+        out.clear();
+        p.encode(&[], &mut out, ctx(1));
+        let (pk, _) = dxl::parse(out.as_slice()).unwrap();
+        assert_eq!(pk.id, 2);
+        // Servo 2 never answers: missing at the deadline, counted.
+        replies.clear();
+        p.expire(&mut replies, ctx(3));
+        assert!(matches!(
+            replies.as_slice()[0].data,
+            ReplyData::Missing { .. }
+        ));
+        assert_eq!(p.counters().missing_replies, 1);
+    }
+}

@@ -1,0 +1,20 @@
+//! Protocol stages: bundle a tick's requests into the fewest packets, scan received words into
+//! replies matched to the requests by credential, and report what never came as missing.
+//!
+//! | Type | Word | Bundling |
+//! |---|---|---|
+//! | [`Dxl2Protocol`] | `u8` | goal writes → one SYNC WRITE per register; reads → one SYNC READ / FAST SYNC READ (BULK / FAST BULK READ for mixed spans) |
+//! | [`Dxl1Protocol`] | `u8` | writes → SYNC WRITE per register; reads → one BULK READ (MX) or one READ per bus window (AX) |
+//! | [`CanMotorProtocol`] | CAN frame | one frame per device and tick (MIT command, ODrive message or RTR request), all sent together |
+
+mod can;
+mod dxl1;
+mod dxl2;
+mod register;
+
+pub use can::{
+    mit_limits, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError, MIT_MODELS,
+};
+pub use dxl1::{Dxl1Protocol, Dxl1ReadMode};
+pub use dxl2::{Dxl2Protocol, Dxl2ReadMode};
+pub use register::{wire_ns, Timing};

@@ -1,0 +1,241 @@
+//! MIT-mode motors and ODrive axes through the CAN protocol stage: on an in-process CAN bus and
+//! through the SLCAN codec against the SLCAN adapter simulator.
+
+use conductor_devices::device::{mit_channel, odrive_channel, MitMotor, OdriveAxis, OdriveMode};
+use conductor_devices::hw::{SlcanHardware, SlcanOptions};
+use conductor_devices::protocol::{mit_limits, CanMotorProtocol};
+use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
+use conductor_devices::sim::hardware::{CanSimHardware, SlcanSimPort};
+use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
+use conductor_devices::{
+    Bounded, Credential, Device, Hardware, Link, LinkOf, Reply, Request, TickCtx, Update,
+};
+use conductor_protocols::can::CanFrame;
+use conductor_protocols::slcan::Dialect;
+
+const PERIOD_NS: u64 = 2_000_000; // 500 Hz
+
+fn blank() -> CanFrame {
+    CanFrame::standard(0, &[]).unwrap()
+}
+
+fn protocol() -> CanMotorProtocol {
+    CanMotorProtocol::new(mit_limits("ak80-9").unwrap(), vec![], 0, 1_000_000, 64)
+}
+
+/// Runs one tick over any CAN link; returns the updates per device index.
+fn tick<H: Hardware<Word = CanFrame>>(
+    link: &mut LinkOf<CanMotorProtocol, H>,
+    devs: &mut [Box<dyn Device>],
+    k: u64,
+    prep: impl Fn(usize, &mut dyn Device, TickCtx, &mut Bounded<Request>),
+) -> Vec<(usize, Update)> {
+    let ctx = TickCtx {
+        tick: k,
+        now_ns: 1_000_000_000 + k * PERIOD_NS,
+    };
+    let mut reqs = Bounded::<Request>::with_capacity(64);
+    for (i, d) in devs.iter_mut().enumerate() {
+        prep(i, d.as_mut(), ctx, &mut reqs);
+        d.flush(ctx, &mut reqs);
+    }
+    link.encode(reqs.as_slice(), ctx);
+    link.exchange(ctx).unwrap();
+    let mut replies = Bounded::<Reply>::with_capacity(64);
+    link.decode(&mut replies, ctx);
+    let mut ups = Bounded::with_capacity(64);
+    let mut out = Vec::new();
+    for r in replies.as_slice() {
+        let Some(i) = devs.iter().position(|d| d.credential() == r.cred) else {
+            continue;
+        };
+        ups.clear();
+        devs[i].reply(r, &mut ups);
+        out.extend(ups.as_slice().iter().map(|u| (i, *u)));
+    }
+    out
+}
+
+fn mit_devices(ids: &[u32]) -> Vec<Box<dyn Device>> {
+    ids.iter()
+        .map(|&id| Box::new(MitMotor::new(Credential::id(id), 20.0, 1.0, true)) as Box<dyn Device>)
+        .collect()
+}
+
+fn mit_nodes(ids: &[u8]) -> Vec<Box<dyn CanNode>> {
+    ids.iter()
+        .map(|&id| {
+            Box::new(MitMotorSim::new(
+                id,
+                mit_limits("ak80-9").unwrap(),
+                0,
+                false,
+            )) as Box<dyn CanNode>
+        })
+        .collect()
+}
+
+/// Each motor gets exactly one frame per tick however many of its channels were written, and
+/// the motors follow the targets.
+#[test]
+fn mit_writes_of_a_tick_combine_into_one_command() {
+    let hw = CanSimHardware::new(mit_nodes(&[1, 2, 3]), 150_000);
+    let mut link = LinkOf::with_fill(protocol(), hw, 64, blank());
+    let mut devs = mit_devices(&[1, 2, 3]);
+    let mut seen = 0;
+    for k in 0..1000 {
+        let before = link.hardware().frames_from_host();
+        let ups = tick(&mut link, &mut devs, k, |i, d, ctx, q| {
+            d.sample(mit_channel::POSITION, ctx, q);
+            if k > 0 {
+                d.write(mit_channel::POSITION, 0.5 * (i as f64 + 1.0), ctx);
+                d.write(mit_channel::KP, 20.0, ctx);
+                d.write(mit_channel::KD, 1.0, ctx);
+            }
+        });
+        let frames = link.hardware().frames_from_host() - before;
+        // Tick 0 only enters motor mode (the enable of `enable_on_start`); then one command.
+        assert_eq!(frames, 3, "tick {k}");
+        seen += ups.iter().filter(|(_, u)| u.value.is_some()).count();
+        assert!(
+            ups.iter().all(|(_, u)| u.value.is_some()),
+            "tick {k}: {ups:?}"
+        );
+    }
+    // Replies arrive 0.15 ms after the command, i.e. in the next tick's exchange.
+    assert_eq!(seen, 999 * 3);
+    let c = link.counters();
+    assert_eq!((c.missing_replies, c.rejected_packets), (0, 0));
+    for s in link.hardware().snapshots() {
+        let target = 0.5 * s.id as f64;
+        // 2 s of a kp = 20, kd = 1 servo on J = 0.01, b = 0.05: settled to the quantisation
+        // of the position field (25 rad / 65 535 ≈ 4e-4) plus damping residue.
+        assert!((s.position - target).abs() < 2e-3, "{s:?}");
+        assert!(s.enabled);
+    }
+}
+
+#[test]
+fn an_absent_motor_goes_stale_and_is_counted() {
+    let hw = CanSimHardware::new(mit_nodes(&[1]), 150_000);
+    let mut link = LinkOf::with_fill(protocol(), hw, 64, blank());
+    let mut devs = mit_devices(&[1, 9]);
+    let mut stale = 0;
+    for k in 0..10 {
+        for (i, u) in tick(&mut link, &mut devs, k, |_, d, ctx, q| {
+            d.sample(mit_channel::POSITION, ctx, q);
+        }) {
+            if i == 1 {
+                assert_eq!(u.value, None);
+                stale += 1;
+            } else {
+                assert!(u.value.is_some());
+            }
+        }
+    }
+    // Tick k's frame expires 1 ms later, i.e. at tick k + 1: 9 expired in 10 ticks.
+    assert_eq!(stale, 9);
+    assert_eq!(link.counters().missing_replies, 9);
+}
+
+/// The same motors through the SLCAN codec and the adapter simulator (CANable dialect, then
+/// LAWICEL's z acks).
+#[test]
+fn mit_over_slcan() {
+    for dialect in [Dialect::CANABLE, Dialect::LAWICEL] {
+        let adapter = SlcanAdapterSim::new(dialect, mit_nodes(&[1, 2, 3]));
+        let port = SlcanSimPort::new(adapter);
+        let hw = SlcanHardware::open(
+            port,
+            SlcanOptions {
+                dialect,
+                ..SlcanOptions::default()
+            },
+        )
+        .unwrap();
+        let mut link = LinkOf::with_fill(protocol(), hw, 64, blank());
+        let mut devs = mit_devices(&[1, 2, 3]);
+        let mut values = 0;
+        for k in 0..200 {
+            let ups = tick(&mut link, &mut devs, k, |i, d, ctx, q| {
+                d.sample(mit_channel::POSITION, ctx, q);
+                d.sample(mit_channel::VELOCITY, ctx, q);
+                d.write(mit_channel::POSITION, -0.3 * (i as f64 + 1.0), ctx);
+            });
+            values += ups.iter().filter(|(_, u)| u.value.is_some()).count();
+        }
+        // The simulated adapter answers at once: replies are decoded in the same tick. Every
+        // reply (the 3 enables' included) updates both sampled channels.
+        assert_eq!(values, (200 * 3 + 3) * 2, "{dialect:?}");
+        let s = link.hardware().stats();
+        assert_eq!(
+            s.frames_out,
+            200 * 3 + 3,
+            "{dialect:?}: one frame per motor and tick, plus the enables"
+        );
+        assert_eq!(s.frames_in, s.frames_out);
+        assert_eq!(
+            (s.nacks, s.ack_timeouts, s.stray_acks, s.discarded_bytes),
+            (0, 0, 0, 0)
+        );
+        let a = link.hardware().port().stats();
+        assert_eq!(a.frames_from_host, 603);
+        // The open sequence's `C` on a closed channel is refused (BEL), harmlessly.
+        assert_eq!(a.nacks, 1);
+        for snap in link
+            .hardware()
+            .port()
+            .adapter()
+            .nodes()
+            .iter()
+            .map(|n| n.snapshot())
+        {
+            assert!(
+                (snap.position + 0.3 * snap.id as f64).abs() < 0.01,
+                "{snap:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn odrive_polled_and_cyclic() {
+    for poll in [true, false] {
+        // Polled: no cyclic messages at all, every value must come from a request.
+        let (hb, enc) = if poll { (0, 0) } else { (100, 10) };
+        let nodes: Vec<Box<dyn CanNode>> = vec![Box::new(OdriveAxisSim::new(3, hb, enc))];
+        let hw = CanSimHardware::new(nodes, 150_000);
+        let mut link = LinkOf::with_fill(protocol(), hw, 64, blank());
+        let mut devs: Vec<Box<dyn Device>> = vec![Box::new(OdriveAxis::new(
+            Credential::id(3),
+            OdriveMode::Position,
+            poll,
+            true,
+        ))];
+        let mut last = None;
+        let mut states = Vec::new();
+        for k in 0..500 {
+            for (_, u) in tick(&mut link, &mut devs, k, |_, d, ctx, q| {
+                // Position and velocity share one request; state is the heartbeat's.
+                let before = q.len();
+                d.sample(odrive_channel::POSITION, ctx, q);
+                d.sample(odrive_channel::VELOCITY, ctx, q);
+                d.sample(odrive_channel::STATE, ctx, q);
+                assert_eq!(q.len() - before, if poll { 2 } else { 0 });
+                d.write(odrive_channel::POSITION, 2.0, ctx);
+            }) {
+                if u.channel == odrive_channel::POSITION {
+                    last = u.value;
+                }
+                if u.channel == odrive_channel::STATE {
+                    states.push(u.value);
+                }
+            }
+        }
+        let snap = link.hardware().snapshots()[0];
+        assert!(snap.enabled, "closed loop after enable_on_start");
+        assert!((snap.position - 2.0).abs() < 1e-3, "{snap:?}");
+        assert!((last.unwrap() - 2.0).abs() < 0.05, "{last:?}");
+        assert!(states.contains(&Some(8.0)), "heartbeat state closed loop");
+    }
+}

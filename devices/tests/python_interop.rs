@@ -1,0 +1,152 @@
+//! Interop with independent implementations (PyPI): ROBOTIS' official `dynamixel-sdk` drives
+//! our Dynamixel simulator, and `python-can`'s `slcan` interface drives our SLCAN adapter
+//! simulator, each over a pseudo-terminal, exactly as they would a U2D2 or a CANable.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use conductor_devices::protocol::mit_limits;
+use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
+use conductor_devices::sim::dxl::DxlSimConfig;
+use conductor_devices::sim::fault::FaultConfig;
+use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty};
+use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
+use conductor_protocols::slcan::Dialect;
+
+fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The venv that `cargo xtask test` creates with tools/python-requirements.txt.
+fn python() -> PathBuf {
+    let py = std::env::var_os("CONDUCTOR_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
+    assert!(
+        py.exists(),
+        "{} not found: run `cargo xtask test` (it creates the venv from tools/python-requirements.txt)",
+        py.display()
+    );
+    py
+}
+
+fn run_script(script: &str, args: &[&str]) -> String {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script);
+    let out = Command::new(python())
+        .arg(path)
+        .args(args)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "{script} failed:\n{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// The value of `"key": value` in a flat JSON line (numbers and number lists only).
+fn field(json: &str, key: &str) -> String {
+    let start = json
+        .find(&format!("\"{key}\": "))
+        .unwrap_or_else(|| panic!("{key} in {json}"))
+        + key.len()
+        + 4;
+    let rest = &json[start..];
+    let end = if rest.starts_with('[') {
+        rest.find(']').unwrap() + 1
+    } else {
+        rest.find([',', '}']).unwrap()
+    };
+    rest[..end].to_string()
+}
+
+fn numbers(s: &str) -> Vec<f64> {
+    s.trim_matches(['[', ']'])
+        .split(',')
+        .filter(|x| !x.trim().is_empty())
+        .map(|x| x.trim().parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn dynamixel_sdk_pings_reads_writes_sync_writes_and_sync_reads_the_simulator() {
+    let pty = Pty::open(None).unwrap();
+    let path = pty.path().to_string();
+    let ids: Vec<u8> = vec![1, 2, 3, 4, 5, 6];
+    let cfg = DxlSimConfig {
+        ids: ids.clone(),
+        // Instant response: what the SDK reads back after a write is exactly the goal.
+        tau_s: 0.0,
+        initial_position: 2100,
+        ..DxlSimConfig::default()
+    };
+    let sim = run_dxl(
+        Endpoint::Pty(pty),
+        cfg,
+        FaultConfig::default(),
+        FaultConfig::default(),
+    );
+    let json = run_script("dxl_sdk_client.py", &[&path, "1,2,3,4,5,6"]);
+    assert_eq!(field(&json, "ping_model"), "1020");
+    assert_eq!(
+        numbers(&field(&json, "broadcast_ids")),
+        [1., 2., 3., 4., 5., 6.]
+    );
+    assert_eq!(numbers(&field(&json, "broadcast_models")), [1020.]);
+    assert_eq!(field(&json, "read_present"), "2100");
+    assert_eq!(field(&json, "write_readback"), "3000");
+    assert_eq!(field(&json, "eeprom_with_torque_error"), "7");
+    let goals = numbers(&field(&json, "sync_write_goals"));
+    assert_eq!(numbers(&field(&json, "sync_read_present")), goals);
+    let bulk = numbers(&field(&json, "bulk_read"));
+    assert_eq!(bulk, [goals[0], 35.0]);
+    let s = sim.sim();
+    for (i, id) in ids.iter().enumerate() {
+        let servo = s.servo(*id).unwrap();
+        assert_eq!(servo.goal_position() as f64, goals[i]);
+        assert_eq!(servo.present_position() as f64, goals[i]);
+    }
+    let st = s.stats();
+    assert_eq!((st.sync_write, st.sync_read, st.bulk_read), (1, 1, 1));
+    assert_eq!(st.ping, 2);
+    assert_eq!(
+        st.discarded_in, 0,
+        "every byte the SDK sent was a valid packet"
+    );
+}
+
+#[test]
+fn python_can_slcan_sends_and_receives_mit_frames() {
+    let pty = Pty::open(None).unwrap();
+    let path = pty.path().to_string();
+    let nodes: Vec<Box<dyn CanNode>> = vec![
+        Box::new(MitMotorSim::new(1, mit_limits("ak80-9").unwrap(), 0, false)),
+        Box::new(OdriveAxisSim::new(4, 0, 0)),
+    ];
+    let sim = run_slcan(
+        Endpoint::Pty(pty),
+        SlcanAdapterSim::new(Dialect::CANABLE, nodes),
+    );
+    let json = run_script("slcan_client.py", &[&path]);
+    assert_eq!(
+        field(&json, "enter_reply_id"),
+        "0",
+        "MIT replies go to the master ID"
+    );
+    assert_eq!(field(&json, "enter_reply_dlc"), "6");
+    let p = numbers(&field(&json, "positions_first_last"));
+    assert!(p[0].abs() < 1e-3, "starts at rest: {p:?}");
+    // 300 commands 2 ms apart with kp = 20, kd = 1: settled near 1 rad.
+    assert!((p[1] - 1.0).abs() < 0.01, "{p:?}");
+    assert_eq!(field(&json, "odrive_reply_id"), (4 * 32 + 9).to_string());
+    assert_eq!(numbers(&field(&json, "odrive_estimates")), [0.0, 0.0]);
+    let a = sim.sim();
+    let s = a.stats();
+    assert_eq!(s.frames_from_host, 1 + 300 + 1 + 1);
+    assert_eq!(s.frames_to_host, s.frames_from_host, "every frame answered");
+    assert!(!a.nodes()[0].snapshot().enabled, "exit frame honoured");
+}

@@ -1,0 +1,354 @@
+//! The simulators as separate processes (`conductor-sim`), driven through the real transports:
+//! `SerialHardware` on the simulator's pty, for the Dynamixel bus directly and for the SLCAN
+//! adapter through `SlcanHardware`. Real time, so the assertions are about packets and bytes,
+//! which do not depend on scheduling, and about values within what the model allows.
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::PathBuf;
+use std::process::{Child, ChildStdin, ChildStdout, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use conductor_devices::device::{mit_channel, x_channel, DxlXConfig, DynamixelX, MitMotor};
+use conductor_devices::hw::{SerialHardware, SerialOptions, SlcanHardware, SlcanOptions};
+use conductor_devices::protocol::{
+    mit_limits, CanMotorProtocol, Dxl2Protocol, Dxl2ReadMode, Timing,
+};
+use conductor_devices::{Bounded, Credential, Device, Link, LinkOf, Reply, Request, TickCtx};
+use conductor_protocols::can::CanFrame;
+
+struct Sim {
+    child: Child,
+    stdin: ChildStdin,
+    stdout: BufReader<ChildStdout>,
+    _dir: PathBuf,
+    link: PathBuf,
+}
+
+impl Sim {
+    fn spawn(args: &[&str]) -> Self {
+        let dir = std::env::temp_dir().join(format!(
+            "conductor-sim-test-{}-{}",
+            std::process::id(),
+            args[0]
+        ));
+        std::fs::create_dir_all(&dir).unwrap();
+        let link = dir.join("tty");
+        let mut child = Command::new(env!("CARGO_BIN_EXE_conductor-sim"))
+            .args(args)
+            .arg("--pty-link")
+            .arg(&link)
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stdin = child.stdin.take().unwrap();
+        let mut stdout = BufReader::new(child.stdout.take().unwrap());
+        let mut line = String::new();
+        stdout.read_line(&mut line).unwrap();
+        assert!(line.starts_with("ready /dev/pts/"), "{line}");
+        assert!(line.contains(&link.display().to_string()), "{line}");
+        Sim {
+            child,
+            stdin,
+            stdout,
+            _dir: dir,
+            link,
+        }
+    }
+
+    fn stats(&mut self) -> String {
+        writeln!(self.stdin, "stats").unwrap();
+        let mut line = String::new();
+        self.stdout.read_line(&mut line).unwrap();
+        line
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = writeln!(self.stdin, "quit");
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = self.child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let _ = self.child.kill();
+    }
+}
+
+fn field(json: &str, key: &str) -> String {
+    let start = json.find(&format!("\"{key}\": ")).unwrap() + key.len() + 4;
+    let rest = &json[start..];
+    let end = if rest.starts_with('[') {
+        rest.find(']').unwrap() + 1
+    } else {
+        rest.find([',', '}']).unwrap()
+    };
+    rest[..end].to_string()
+}
+
+fn num(json: &str, key: &str) -> u64 {
+    field(json, key).parse().unwrap()
+}
+
+fn now_ns(t0: Instant) -> u64 {
+    t0.elapsed().as_nanos() as u64
+}
+
+#[test]
+fn dynamixel_process_over_a_pty_at_250_hz() {
+    let mut sim = Sim::spawn(&["dxl", "--servos", "6"]);
+    let hw = SerialHardware::open(sim.link.to_str().unwrap(), &SerialOptions::default()).unwrap();
+    let timing = Timing {
+        baud: 1_000_000,
+        return_delay_ns: 0,
+        timeout_ns: 2_000_000,
+    };
+    let mut link = LinkOf::new(
+        Dxl2Protocol::new(timing, Dxl2ReadMode::Sync, 6, 48),
+        hw,
+        4096,
+    );
+    let mut devs: Vec<DynamixelX> = (1..=6)
+        .map(|id| DynamixelX::new(Credential::id(id), DxlXConfig::default()))
+        .collect();
+    let mut reqs = Bounded::<Request>::with_capacity(64);
+    let mut replies = Bounded::<Reply>::with_capacity(64);
+    let mut ups = Bounded::with_capacity(64);
+    let t0 = Instant::now();
+    let period = 4_000_000u64;
+    let (mut values, mut stale) = (0u32, 0u32);
+    let mut last = [0.0f64; 6];
+    for k in 0..250u64 {
+        let due = k * period;
+        let now = now_ns(t0);
+        if due > now {
+            std::thread::sleep(Duration::from_nanos(due - now));
+        }
+        let ctx = TickCtx {
+            tick: k,
+            now_ns: now_ns(t0),
+        };
+        reqs.clear();
+        for d in devs.iter_mut() {
+            d.sample(x_channel::POSITION, ctx, &mut reqs);
+            d.write(x_channel::POSITION, 0.25, ctx);
+            d.flush(ctx, &mut reqs);
+        }
+        link.encode(reqs.as_slice(), ctx);
+        link.exchange(ctx).unwrap();
+        replies.clear();
+        link.decode(&mut replies, ctx);
+        for r in replies.as_slice() {
+            let i = (r.cred.id - 1) as usize;
+            ups.clear();
+            devs[i].reply(r, &mut ups);
+            for u in ups.as_slice() {
+                match u.value {
+                    Some(v) => {
+                        values += 1;
+                        last[i] = v;
+                    }
+                    None => stale += 1,
+                }
+            }
+        }
+    }
+    // Let the last tick's bytes reach the simulator before comparing counts.
+    std::thread::sleep(Duration::from_millis(50));
+    let s = sim.stats();
+    let c = link.counters();
+    // Nothing is lost on a pty: the simulator saw every packet and byte the stage sent.
+    assert_eq!(num(&s, "packets_in"), c.packets_out, "{s}");
+    assert_eq!(num(&s, "bytes_in"), c.words_out, "{s}");
+    assert_eq!(num(&s, "discarded_in"), 0);
+    // One SYNC WRITE and one SYNC READ per bus window.
+    assert_eq!(num(&s, "sync_write"), num(&s, "sync_read"));
+    assert_eq!(num(&s, "sync_write") * 2, c.packets_out);
+    assert!(num(&s, "sync_write") >= 200, "{s}");
+    // Every reply that came is a value; a late one (scheduling) is stale and counted.
+    assert_eq!(c.missing_replies, stale as u64);
+    // Every request was answered or declared missing, except those of the last tick or two
+    // (still on the wire, or queued while the bus was busy); late replies on a busy machine are
+    // the stale ones.
+    assert!(
+        (6 * 248..=6 * 250).contains(&(values + stale)),
+        "{values} values, {stale} stale"
+    );
+    assert!(values >= 6 * 125, "{values} values, {stale} stale");
+    // 1 s at τ = 50 ms: at the goal (0.25 rad = 163 pulses from the middle).
+    for v in last {
+        assert!(
+            (v - 0.25).abs() < 2.0 * 2.0 * std::f64::consts::PI / 4096.0,
+            "{last:?}"
+        );
+    }
+    assert_eq!(field(&s, "goal"), "[2211,2211,2211,2211,2211,2211]");
+}
+
+#[test]
+fn slcan_process_with_three_mit_motors() {
+    let mut sim = Sim::spawn(&["slcan", "--mit", "1,2,3", "--odrive", "4"]);
+    let port = SerialHardware::open(sim.link.to_str().unwrap(), &SerialOptions::default()).unwrap();
+    let hw = SlcanHardware::open(port, SlcanOptions::default()).unwrap();
+    let proto = CanMotorProtocol::new(mit_limits("ak80-9").unwrap(), vec![], 0, 3_000_000, 32);
+    let mut link = LinkOf::with_fill(proto, hw, 64, CanFrame::standard(0, &[]).unwrap());
+    let mut devs: Vec<MitMotor> = (1..=3)
+        .map(|id| MitMotor::new(Credential::id(id), 20.0, 1.0, true))
+        .collect();
+    let mut reqs = Bounded::<Request>::with_capacity(64);
+    let mut replies = Bounded::<Reply>::with_capacity(64);
+    let mut ups = Bounded::with_capacity(64);
+    let t0 = Instant::now();
+    let period = 2_000_000u64;
+    let (mut values, mut stale) = (0u64, 0u64);
+    let mut total_heartbeats = 0;
+    let mut last = [0.0f64; 3];
+    for k in 0..500u64 {
+        let due = k * period;
+        let now = now_ns(t0);
+        if due > now {
+            std::thread::sleep(Duration::from_nanos(due - now));
+        }
+        let ctx = TickCtx {
+            tick: k,
+            now_ns: now_ns(t0),
+        };
+        reqs.clear();
+        for (i, d) in devs.iter_mut().enumerate() {
+            d.sample(mit_channel::POSITION, ctx, &mut reqs);
+            d.write(mit_channel::POSITION, 0.4 * (i as f64 + 1.0), ctx);
+            d.flush(ctx, &mut reqs);
+        }
+        link.encode(reqs.as_slice(), ctx);
+        link.exchange(ctx).unwrap();
+        replies.clear();
+        link.decode(&mut replies, ctx);
+        let mut heartbeats = 0;
+        for r in replies.as_slice() {
+            // Node 4 is an ODrive: its cyclic heartbeat arrives unasked.
+            if r.cred.id == 4 {
+                heartbeats += 1;
+                continue;
+            }
+            let i = (r.cred.id - 1) as usize;
+            ups.clear();
+            devs[i].reply(r, &mut ups);
+            for u in ups.as_slice() {
+                match u.value {
+                    Some(v) => {
+                        values += 1;
+                        last[i] = v;
+                    }
+                    None => stale += 1,
+                }
+            }
+        }
+        total_heartbeats += heartbeats;
+    }
+    // 1 s of 100 ms heartbeats.
+    assert!((8..=12).contains(&total_heartbeats), "{total_heartbeats}");
+    std::thread::sleep(Duration::from_millis(50));
+    let s = sim.stats();
+    let hs = link.hardware().stats();
+    assert_eq!(num(&s, "frames_from_host"), hs.frames_out, "{s}");
+    assert_eq!(
+        hs.frames_out,
+        3 + 500 * 3,
+        "one frame per motor and tick, plus the enables"
+    );
+    assert_eq!(hs.nacks, 0);
+    // Every frame but the last tick's was answered or declared missing: one position update
+    // each (the enables' replies included).
+    assert!(
+        (3 * 500..=3 * 501).contains(&(values + stale)),
+        "{values} + {stale}"
+    );
+    assert_eq!(link.counters().missing_replies, stale);
+    assert!(values >= 3 * 250, "{values} values, {stale} stale");
+    for (i, v) in last.iter().enumerate() {
+        assert!((v - 0.4 * (i as f64 + 1.0)).abs() < 0.01, "{last:?}");
+    }
+}
+
+/// The simulator behind a UDP socket (what a serial-over-UDP bridge looks like) and the `udp`
+/// transport: same packets, same answers.
+#[test]
+fn dynamixel_over_udp() {
+    use conductor_devices::hw::UdpHardware;
+    use conductor_devices::sim::dxl::DxlSimConfig;
+    use conductor_devices::sim::fault::FaultConfig;
+    use conductor_devices::sim::runner::{run_dxl, Endpoint};
+
+    let ep = Endpoint::udp("127.0.0.1:0".parse().unwrap()).unwrap();
+    let sim = run_dxl(
+        ep,
+        DxlSimConfig {
+            ids: vec![1, 2, 3],
+            tau_s: 0.0,
+            ..DxlSimConfig::default()
+        },
+        FaultConfig::default(),
+        FaultConfig::default(),
+    );
+    let peer = sim.endpoint().parse().unwrap();
+    let hw = UdpHardware::open("127.0.0.1:0".parse().unwrap(), peer).unwrap();
+    let timing = Timing {
+        baud: 1_000_000,
+        return_delay_ns: 0,
+        timeout_ns: 5_000_000,
+    };
+    let mut link = LinkOf::new(
+        Dxl2Protocol::new(timing, Dxl2ReadMode::Fast, 3, 8),
+        hw,
+        2048,
+    );
+    let mut devs: Vec<DynamixelX> = (1..=3)
+        .map(|id| DynamixelX::new(Credential::id(id), DxlXConfig::default()))
+        .collect();
+    let mut reqs = Bounded::<Request>::with_capacity(16);
+    let mut replies = Bounded::<Reply>::with_capacity(16);
+    let mut ups = Bounded::with_capacity(16);
+    let t0 = Instant::now();
+    let mut last = [None; 3];
+    for k in 0..100u64 {
+        let due = k * 4_000_000;
+        let now = now_ns(t0);
+        if due > now {
+            std::thread::sleep(Duration::from_nanos(due - now));
+        }
+        let ctx = TickCtx {
+            tick: k,
+            now_ns: now_ns(t0),
+        };
+        reqs.clear();
+        for d in devs.iter_mut() {
+            d.sample(x_channel::POSITION, ctx, &mut reqs);
+            d.write(x_channel::POSITION, -0.5, ctx);
+            d.flush(ctx, &mut reqs);
+        }
+        link.encode(reqs.as_slice(), ctx);
+        link.exchange(ctx).unwrap();
+        replies.clear();
+        link.decode(&mut replies, ctx);
+        for r in replies.as_slice() {
+            let i = (r.cred.id - 1) as usize;
+            ups.clear();
+            devs[i].reply(r, &mut ups);
+            if let Some(u) = ups.as_slice().iter().find(|u| u.value.is_some()) {
+                last[i] = u.value;
+            }
+        }
+    }
+    std::thread::sleep(Duration::from_millis(50));
+    let s = sim.sim().stats();
+    let c = link.counters();
+    assert_eq!(s.packets_in, c.packets_out);
+    assert_eq!(s.bytes_in, c.words_out);
+    assert!(s.fast_sync_read >= 90, "{s:?}");
+    // τ = 0: the servos are at the goal (−0.5 rad → 2048 − 326 pulses) exactly.
+    let want = (2048 - 326 - 2048) as f64 * 2.0 * std::f64::consts::PI / 4096.0;
+    assert_eq!(last, [Some(want); 3]);
+}
