@@ -30,11 +30,13 @@ fn requests() -> Vec<Request<'static>> {
         Request::Subscribe {
             id: 7,
             period_us: 10_000,
+            generation: 3,
         },
         Request::UnsubscribeAll,
         Request::Set {
             id: 3,
             value: -12.5,
+            generation: 3,
         },
         Request::Exec {
             line: "defscale Padca adca -1.5 1.5 0 100",
@@ -127,17 +129,27 @@ fn every_reply_round_trips() {
 }
 
 /// The layout written out by hand: version 1, kind 0x05 (Set), seq 0x0102, id 3, 1.0 as f64
-/// LE; CRC-16/UMTS of those 13 bytes; COBS: the zero bytes of the f64 become run codes.
+/// LE, generation 0x01020304 LE; CRC-16/UMTS of those 17 bytes; COBS: each zero byte of the
+/// f64 ends a run (the run code counts the bytes up to it, plus one).
 #[test]
 fn golden_set_frame() {
-    let msg = [0x01, 0x05, 0x02, 0x01, 0x03, 0, 0, 0, 0, 0, 0, 0xF0, 0x3F];
+    let msg = [
+        0x01, 0x05, 0x02, 0x01, 0x03, 0, 0, 0, 0, 0, 0, 0xF0, 0x3F, 0x04, 0x03, 0x02, 0x01,
+    ];
     let crc = conductor_protocols::dynamixel2::crc::crc16(&msg).to_le_bytes();
-    let f = frame_request(0x0102, &Request::Set { id: 3, value: 1.0 });
+    let f = frame_request(
+        0x0102,
+        &Request::Set {
+            id: 3,
+            value: 1.0,
+            generation: 0x0102_0304,
+        },
+    );
     let mut expected = vec![
         0x06, 0x01, 0x05, 0x02, 0x01, 0x03, 0x01, 0x01, 0x01, 0x01, 0x01,
     ];
-    expected.push(0x05);
-    expected.extend_from_slice(&[0xF0, 0x3F, crc[0], crc[1]]);
+    expected.push(0x09);
+    expected.extend_from_slice(&[0xF0, 0x3F, 0x04, 0x03, 0x02, 0x01, crc[0], crc[1]]);
     expected.push(0x00);
     assert!(
         !crc.contains(&0),
@@ -191,7 +203,14 @@ fn other_version_and_unknown_kind_are_typed_errors() {
     // A request is not a reply.
     assert_eq!(decode_reply(&msgs[0]), Err(MessageError::UnknownKind(0x07)));
     // Truncated and trailing bytes.
-    let (msgs, _) = messages(&frame_request(1, &Request::Set { id: 1, value: 2.0 }));
+    let (msgs, _) = messages(&frame_request(
+        1,
+        &Request::Set {
+            id: 1,
+            value: 2.0,
+            generation: 0,
+        },
+    ));
     assert_eq!(
         decode_request(&msgs[0][..msgs[0].len() - 1]),
         Err(MessageError::Truncated)
@@ -256,7 +275,7 @@ proptest! {
     ) {
         let mut stream = Vec::new();
         for (i, s) in seqs.iter().enumerate() {
-            stream.extend(frame_request(*s, &Request::Set { id: i as u8, value: values[i] }));
+            stream.extend(frame_request(*s, &Request::Set { id: i as u8, value: values[i], generation: 1 }));
         }
         let (whole, whole_stats) = messages(&stream);
         let mut sc = FrameScanner::<MAX_FRAME>::new();
@@ -276,7 +295,7 @@ proptest! {
             let (seq, r) = decode_request(m).unwrap();
             prop_assert_eq!(seq, seqs[i]);
             match r {
-                Request::Set { id, value } => {
+                Request::Set { id, value, .. } => {
                     prop_assert_eq!(id, i as u8);
                     prop_assert_eq!(value.to_bits(), values[i].to_bits());
                 }

@@ -61,6 +61,9 @@ pub enum Request<'a> {
         id: u8,
         /// Sampling period in microseconds; 0 unsubscribes.
         period_us: u32,
+        /// Table generation the host listed `id` in; refused with [`ErrorCode::Stale`] if the
+        /// table has changed since (the slot may hold another variable now).
+        generation: u32,
     },
     /// Stop every subscription. [`Reply::Ack`].
     UnsubscribeAll,
@@ -70,6 +73,8 @@ pub enum Request<'a> {
         id: u8,
         /// New value.
         value: f64,
+        /// Table generation the host listed `id` in (see [`Request::Subscribe`]).
+        generation: u32,
     },
     /// Run one command line as if typed on the terminal: [`Reply::Output`] chunks, then
     /// [`Reply::ExecDone`].
@@ -95,6 +100,8 @@ pub enum ErrorCode {
     Refused = 4,
     /// No free subscription slot.
     TooManySubscriptions = 5,
+    /// The table changed since the host listed it: list again.
+    Stale = 6,
 }
 
 impl ErrorCode {
@@ -105,6 +112,7 @@ impl ErrorCode {
             3 => Self::NotWritable,
             4 => Self::Refused,
             5 => Self::TooManySubscriptions,
+            6 => Self::Stale,
             _ => {
                 return Err(MessageError::BadField {
                     field: "error code",
@@ -345,16 +353,26 @@ fn write_request(seq: u16, req: &Request<'_>, w: &mut Out<'_>) -> Result<(), Mes
     match *req {
         Request::Hello => header(w, kind::HELLO, seq),
         Request::ListVars => header(w, kind::LIST, seq),
-        Request::Subscribe { id, period_us } => {
+        Request::Subscribe {
+            id,
+            period_us,
+            generation,
+        } => {
             header(w, kind::SUBSCRIBE, seq)?;
             w.u8(id)?;
-            w.u32(period_us)
+            w.u32(period_us)?;
+            w.u32(generation)
         }
         Request::UnsubscribeAll => header(w, kind::UNSUBSCRIBE_ALL, seq),
-        Request::Set { id, value } => {
+        Request::Set {
+            id,
+            value,
+            generation,
+        } => {
             header(w, kind::SET, seq)?;
             w.u8(id)?;
-            w.f64(value)
+            w.f64(value)?;
+            w.u32(generation)
         }
         Request::Exec { line } => {
             header(w, kind::EXEC, seq)?;
@@ -477,11 +495,13 @@ pub fn decode_request(msg: &[u8]) -> Result<(u16, Request<'_>), MessageError> {
         kind::SUBSCRIBE => Request::Subscribe {
             id: r.u8()?,
             period_us: r.u32()?,
+            generation: r.u32()?,
         },
         kind::UNSUBSCRIBE_ALL => Request::UnsubscribeAll,
         kind::SET => Request::Set {
             id: r.u8()?,
             value: r.f64()?,
+            generation: r.u32()?,
         },
         kind::EXEC => Request::Exec { line: r.str()? },
         kind::TIME => Request::Time,
