@@ -6,8 +6,7 @@ use embassy_rp::gpio::{Flex, Level};
 use embassy_rp::pac;
 use embassy_rp::pac::pwm::vals::Divmode;
 use embassy_rp::peripherals::{
-    PWM_SLICE0, PWM_SLICE1, PWM_SLICE2, PWM_SLICE3, PWM_SLICE4, PWM_SLICE5, PWM_SLICE6,
-    PWM_SLICE7,
+    PWM_SLICE0, PWM_SLICE1, PWM_SLICE2, PWM_SLICE3, PWM_SLICE4, PWM_SLICE5, PWM_SLICE6, PWM_SLICE7,
 };
 use embassy_rp::Peri;
 use score_board::hal::{PinFunction, PortIo};
@@ -76,6 +75,13 @@ impl PortIo for RpIo {
             w.set_a_inv(r.a_inv);
             w.set_b_inv(r.b_inv);
             w.set_en(r.enable);
+        });
+    }
+
+    fn pwm_compare(&mut self, slice: u8, cc_a: u16, cc_b: u16) {
+        pac::PWM.ch(slice as usize).cc().write(|w| {
+            w.set_a(cc_a);
+            w.set_b(cc_b);
         });
     }
 

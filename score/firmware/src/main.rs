@@ -80,7 +80,10 @@ static WAKE: Signal<ThreadModeRawMutex, ()> = Signal::new();
 /// Whole frames for the link's IN endpoint.
 static LINK_TX: Queue<ThreadModeRawMutex, Frame, 12> = Queue::new();
 
-#[embassy_executor::main(executor = "embassy_rp::executor::Executor", entry = "cortex_m_rt::entry")]
+#[embassy_executor::main(
+    executor = "embassy_rp::executor::Executor",
+    entry = "cortex_m_rt::entry"
+)]
 async fn main(spawner: Spawner) {
     let p = embassy_rp::init(Default::default());
     if let Some(mut cp) = cortex_m::Peripherals::take() {
@@ -136,9 +139,8 @@ async fn main(spawner: Spawner) {
         ),
         sys_hz: embassy_rp::clocks::clk_sys_freq(),
     };
-    let board: &'static Shared = BOARD.init_with(|| {
-        Mutex::new(RefCell::new(Board::new(BoardHal::new(io), INFO)))
-    });
+    let board: &'static Shared =
+        BOARD.init_with(|| Mutex::new(RefCell::new(Board::new(BoardHal::new(io), INFO))));
 
     let driver = Driver::new(p.USB, Irqs);
     let mut config = embassy_usb::Config::new(USB_VID, USB_PID);
@@ -339,7 +341,13 @@ async fn terminal_task(class: CdcAcmClass<'static, Drv>, board: &'static Shared)
             match select(rx.read_packet(&mut buf), control.control_changed()).await {
                 Either::First(Ok(n)) => {
                     let ran = board.lock(|b| {
-                        term.feed(&buf[..n], &mut b.borrow_mut(), now_us(), &mut out, &mut extra_commands)
+                        term.feed(
+                            &buf[..n],
+                            &mut b.borrow_mut(),
+                            now_us(),
+                            &mut out,
+                            &mut extra_commands,
+                        )
                     });
                     if ran {
                         WAKE.signal(());
@@ -373,7 +381,13 @@ async fn link_rx_task(mut rx: cdc_acm::Receiver<'static, Drv>, board: &'static S
         while let Ok(n) = rx.read_packet(&mut buf).await {
             out.clear();
             let woke = board.lock(|b| {
-                server.feed(&buf[..n], &mut b.borrow_mut(), now_us(), &mut out, &mut extra_commands)
+                server.feed(
+                    &buf[..n],
+                    &mut b.borrow_mut(),
+                    now_us(),
+                    &mut out,
+                    &mut extra_commands,
+                )
             });
             if woke {
                 WAKE.signal(());
@@ -392,7 +406,10 @@ async fn link_rx_task(mut rx: cdc_acm::Receiver<'static, Drv>, board: &'static S
 async fn link_tx_task(mut tx: cdc_acm::Sender<'static, Drv>) -> ! {
     loop {
         let frame = LINK_TX.receive().await;
-        if write_all(&mut tx, &frame, LINK_TX.is_empty()).await.is_err() {
+        if write_all(&mut tx, &frame, LINK_TX.is_empty())
+            .await
+            .is_err()
+        {
             tx.wait_connection().await;
         }
     }

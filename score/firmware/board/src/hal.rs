@@ -26,8 +26,11 @@ pub trait PortIo {
     fn sys_clock_hz(&self) -> u32;
     /// One 12-bit conversion of ADC channel `ch` (0-3 = GPIO 26-29, 4 = temperature sensor).
     fn adc_convert(&mut self, ch: u8) -> Result<u16, HalError>;
-    /// Writes a slice's divider, TOP, compares, inversions and enable.
+    /// Writes a slice's divider, TOP, compares, inversions and enable (a new configuration).
     fn pwm_write(&mut self, regs: &SliceRegs);
+    /// Writes only the compare values of a running slice (a duty change: the counter must
+    /// not be disturbed; the hardware applies them at the next wrap).
+    fn pwm_compare(&mut self, slice: u8, cc_a: u16, cc_b: u16);
     /// Sets a pin's function.
     fn pin_function(&mut self, pin: u8, f: PinFunction);
     /// Level of a pin.
@@ -125,7 +128,7 @@ impl<P: PortIo> Pwm for BoardHal<P> {
     fn pwm_set_duty(&mut self, out: PwmOutput, duty: f32) -> f32 {
         let (d, regs) = self.pwm.set_duty(out, duty);
         if let Some(r) = regs {
-            self.io.pwm_write(&r);
+            self.io.pwm_compare(r.slice, r.cc_a, r.cc_b);
         }
         d
     }
@@ -210,6 +213,11 @@ impl PortIo for MemIo {
     }
     fn pwm_write(&mut self, regs: &SliceRegs) {
         self.slices[regs.slice as usize] = *regs;
+    }
+    fn pwm_compare(&mut self, slice: u8, cc_a: u16, cc_b: u16) {
+        let s = &mut self.slices[slice as usize];
+        s.cc_a = cc_a;
+        s.cc_b = cc_b;
     }
     fn pin_function(&mut self, pin: u8, f: PinFunction) {
         self.function[pin as usize] = Some(f);

@@ -68,15 +68,26 @@ impl Emulator {
     /// Starts the harness on the firmware found by [`crate::paths::firmware_elf`], with the
     /// PTYs in a fresh temporary directory.
     pub fn start() -> Result<Self, EmuError> {
-        let dir =
-            std::env::temp_dir().join(format!("score-emu-{}-{}", std::process::id(), unique()));
-        std::fs::create_dir_all(&dir).map_err(EmuError::Spawn)?;
-        Self::start_at(&dir.join("term"), &dir.join("link"))
+        let elf = crate::paths::firmware_elf().map_err(EmuError::Missing)?;
+        Self::start_image(&elf)
     }
 
-    /// Starts the harness with the PTYs at the given paths (to restart "the same board").
+    /// Starts the harness on `image` (ELF or UF2), PTYs in a fresh temporary directory.
+    pub fn start_image(image: &Path) -> Result<Self, EmuError> {
+        let (term, link) = fresh_pty_paths()?;
+        Self::start_with(image, &term, &link)
+    }
+
+    /// Starts the harness on the default firmware with the PTYs at the given paths (to
+    /// restart "the same board" after [`Emulator::kill`]).
     pub fn start_at(term: &Path, link: &Path) -> Result<Self, EmuError> {
         let elf = crate::paths::firmware_elf().map_err(EmuError::Missing)?;
+        Self::start_with(&elf, term, link)
+    }
+
+    /// Starts the harness on `image` with the PTYs at `term` and `link`.
+    pub fn start_with(image: &Path, term: &Path, link: &Path) -> Result<Self, EmuError> {
+        let elf = image.to_path_buf();
         let dir = crate::paths::harness_dir().map_err(EmuError::Missing)?;
         let mut child = Command::new("node")
             .arg(dir.join("harness.mjs"))
@@ -221,6 +232,13 @@ impl Drop for Emulator {
     fn drop(&mut self) {
         self.kill();
     }
+}
+
+/// Two PTY paths in a new temporary directory.
+pub fn fresh_pty_paths() -> Result<(PathBuf, PathBuf), EmuError> {
+    let dir = std::env::temp_dir().join(format!("score-emu-{}-{}", std::process::id(), unique()));
+    std::fs::create_dir_all(&dir).map_err(EmuError::Spawn)?;
+    Ok((dir.join("term"), dir.join("link")))
 }
 
 fn unique() -> u64 {
