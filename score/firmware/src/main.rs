@@ -248,7 +248,7 @@ async fn write_all(
     for chunk in bytes.chunks(64) {
         tx.write_packet(chunk).await?;
     }
-    if end_transfer && !bytes.is_empty() && bytes.len() % 64 == 0 {
+    if end_transfer && !bytes.is_empty() && bytes.len().is_multiple_of(64) {
         tx.write_packet(&[]).await?;
     }
     Ok(())
