@@ -406,7 +406,7 @@ async function main() {
           const code = req.volts !== undefined ? Math.round((req.volts / 3.3) * 4095) : req.value;
           if (!(code >= 0 && code <= 4095)) throw new Error('code must be 0-4095');
           mcu.adc.channelValues[ch] = code;
-          reply({ id, ok: true, code });
+          reply({ id, ok: true, code, nanos: sim.clock.nanos });
           break;
         }
         case 'pwm': {

@@ -180,6 +180,15 @@ impl Emulator {
         Ok(r["code"].as_u64().unwrap_or(0) as u16)
     }
 
+    /// Like [`Emulator::set_adc_volts`], also returning the emulated time (ns) of the change.
+    pub fn set_adc_volts_timed(&mut self, ch: u8, volts: f64) -> Result<(u16, f64), EmuError> {
+        let r = self.request(json!({"cmd": "adc", "channel": ch, "volts": volts}))?;
+        Ok((
+            r["code"].as_u64().unwrap_or(0) as u16,
+            r["nanos"].as_f64().unwrap_or(f64::NAN),
+        ))
+    }
+
     /// Sets the raw code ADC channel `ch` converts to.
     pub fn set_adc_code(&mut self, ch: u8, code: u16) -> Result<(), EmuError> {
         self.request(json!({"cmd": "adc", "channel": ch, "value": code}))
