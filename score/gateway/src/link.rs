@@ -93,14 +93,21 @@ impl Link {
                 path: path.display().to_string(),
                 error: e.to_string(),
             })?;
+        // Sequence numbers start somewhere new each time, so a late reply to a previous host
+        // (or a previous connection) cannot be taken for an answer.
+        let seed = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(1, |d| d.subsec_nanos() as u16);
         let mut l = Self {
             port,
             scanner: FrameScanner::new(),
-            seq: 0,
+            seq: seed,
             events: VecDeque::new(),
         };
+        // Drop what is already buffered (bounded: a board may still be streaming samples).
+        let end = Instant::now() + Duration::from_millis(50);
         let mut sink = [0u8; 1024];
-        while matches!(l.port.read(&mut sink), Ok(n) if n > 0) {}
+        while Instant::now() < end && matches!(l.port.read(&mut sink), Ok(n) if n > 0) {}
         // A lone terminator ends whatever partial frame the board may hold from a previous host.
         l.port.write_all(&[0]).map_err(GatewayError::Io)?;
         Ok(l)

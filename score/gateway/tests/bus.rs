@@ -136,9 +136,30 @@ fn adc_on_the_bus_pwm_from_a_controller_and_replug() {
     // A read-only state refuses setpoints at the controller already.
     assert!(ctl.add_ctrl("score-rp2040/adc0", 1.0).is_err());
 
+    // A variable typed on the terminal while the gateway runs becomes a state too.
+    let mut t = Port::open(&emu.term, WAIT).unwrap();
+    t.write_all(b"defexp k 5\r").unwrap();
+    t.read_until_suffix("$> ", WAIT).unwrap();
+    drop(t);
+    let end = Instant::now() + WAIT;
+    let mut k = loop {
+        match StateSubscriber::new(&bus, "score-rp2040/k") {
+            Ok(s) => break s,
+            Err(e) if Instant::now() > end => panic!("k never became a state: {e}"),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    };
+    assert_eq!(
+        (k.info().meta.rate_hz, k.info().meta.writable),
+        (10.0, true)
+    );
+    wait_for(&mut k, "k = 5", |x| x == 5.0);
+
     // Unplug: the board disappears; plug back in: a fresh board with an empty table.
     emu.kill();
     std::thread::sleep(Duration::from_millis(300));
+    // Nothing is published while the board is away: what is queued is from before.
+    while k.receive().unwrap().is_some() {}
     let mut emu = Emulator::start_at(&term, &link).unwrap_or_else(|e| panic!("{e}"));
     let code = emu.set_adc_volts(0, 1.2).unwrap();
     // The gateway reconnects, restores the configuration and publishing resumes on the same
