@@ -35,11 +35,12 @@ const log = (...a) => process.stderr.write(`[harness] ${a.join(' ')}\n`);
 
 // ---------------------------------------------------------------- arguments
 function parseArgs(argv) {
-  const out = { firmware: null, term: null, link: null };
+  const out = { firmware: null, term: null, link: null, bootrom: null };
   for (let i = 0; i < argv.length; i++) {
     const a = argv[i];
     if (a === '--term') out.term = argv[++i];
     else if (a === '--link') out.link = argv[++i];
+    else if (a === '--bootrom') out.bootrom = argv[++i];
     else if (!out.firmware) out.firmware = a;
     else throw new Error(`unexpected argument ${a}`);
   }
@@ -366,7 +367,14 @@ async function main() {
   const sim = new Simulator();
   const mcu = sim.rp2040;
   mcu.logger = new ConsoleLogger(LogLevel.Error);
-  mcu.reset();
+  if (opts.bootrom) {
+    // loadBootrom() resets the chip (and erases flash): before the firmware is loaded.
+    const rom = fs.readFileSync(opts.bootrom);
+    if (rom.length !== 16384) throw new Error(`${opts.bootrom}: expected a 16 KiB bootrom`);
+    mcu.loadBootrom(new Uint32Array(rom.buffer, rom.byteOffset, rom.length / 4));
+  } else {
+    mcu.reset();
+  }
   const bytes = fs.readFileSync(opts.firmware);
   const n = opts.firmware.endsWith('.uf2') ? loadUf2(bytes, mcu.flash) : loadElf(bytes, mcu.flash);
   log(`loaded ${n} bytes from ${opts.firmware}`);
