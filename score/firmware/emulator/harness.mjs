@@ -2,8 +2,10 @@
 // Runs the Score firmware (ELF or UF2) in rp2040js 1.4.1 with its USB CDC-ACM interfaces bridged
 // to pseudo-terminals, and a JSON-lines control channel on stdin/stdout for tests.
 //
-//   node harness.mjs <firmware.elf|.uf2> [--term PATH] [--link PATH]
+//   node harness.mjs <firmware.elf|.uf2> [--term PATH] [--link PATH] [--bootrom FILE]
 //
+// Without --bootrom the chip starts at boot2 with SP set by hand (enough for the default
+// firmware); firmware built with `rom-floats` calls ROM routines and needs the 16 KiB B1 bootrom.
 // * USB: the harness is the USB host. It enumerates the device, finds every CDC function
 //   (communications interface + data interface with bulk IN/OUT) and bridges function 0 to the
 //   PTY at --term and function 1 to --link, through `socat PTY,link=PATH,raw,echo=0` connected
