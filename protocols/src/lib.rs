@@ -13,6 +13,7 @@
 //! | [`can`] | A classic CAN frame type implementing [`embedded_can::Frame`] |
 //! | [`mit_can`] | "MIT mode" CAN motors (Ben Katz firmware, CubeMars AK series) |
 //! | [`odrive_can`] | ODrive CAN Simple, firmware 0.6.x |
+//! | [`score_link`] | The COBS-framed, versioned link between a Score board and its gateway |
 //! | [`slcan`] | SLCAN / LAWICEL ASCII serial-line CAN: host and adapter sides, line scanner |
 //! | [`scan`] | The discard counters shared by the scanners |
 //!
@@ -30,6 +31,7 @@ pub mod dynamixel2;
 pub mod mit_can;
 pub mod odrive_can;
 pub mod scan;
+pub mod score_link;
 pub mod slcan;
 mod writer;
 

@@ -412,6 +412,7 @@ impl<N: Real> Engine<N> {
                 }
             };
             task.advance_one(t);
+            task.last = Some(t);
             if let Some(s) = &mut self.syms[i] {
                 s.task = Some(task);
             }

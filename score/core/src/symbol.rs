@@ -233,6 +233,8 @@ pub(crate) struct Task {
     frac: u32,
     /// Updates skipped because the port called `tick` more than a period late.
     pub missed: u32,
+    /// Instant of the latest update (`None` before the first).
+    pub last: Option<u64>,
 }
 
 impl Task {
@@ -244,6 +246,7 @@ impl Task {
             due: None,
             frac: 0,
             missed: 0,
+            last: None,
         };
         t.set_rate(mhz);
         t

@@ -109,6 +109,19 @@ impl<N: Real> Engine<N> {
         (0..MAX_SYMBOLS).filter_map(move |i| self.info(VarId(i as u8)))
     }
 
+    /// The instant (µs, the time given to [`Engine::tick`]) of the latest update of a periodic
+    /// variable; an ADC's volts report the channel's update. `None` for bare expressions and
+    /// before the first update. A gateway stamps samples with it, so a value read later still
+    /// carries the time it was produced.
+    pub fn last_update_us(&self, id: VarId) -> Option<u64> {
+        let s = self.sym(id)?;
+        let task = match s.kind {
+            Kind::AdcVolts { raw } => self.sym(raw).and_then(|r| r.task),
+            _ => s.task,
+        };
+        task.and_then(|t| t.last)
+    }
+
     /// Updates skipped by the scheduler for `id` because ticks came more than a period late.
     pub fn missed_updates(&self, id: VarId) -> Option<u32> {
         self.sym(id).and_then(|s| s.task).map(|t| t.missed)

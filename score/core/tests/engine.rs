@@ -245,3 +245,35 @@ fn help_lists_menus_and_capacities() {
         assert!(out.contains(c.summary), "{}", c.name);
     }
 }
+
+#[test]
+fn last_update_reports_the_scheduled_instant_of_the_latest_update() {
+    let (mut e, mut b) = engine();
+    e.set_time(1_000);
+    run(
+        &mut e,
+        &mut b,
+        "adc 0 100\ndefexp k 2\ndefexp twice adc0 k *",
+    );
+    let (raw, volts, lazy) = (
+        e.lookup("ADC0").unwrap(),
+        e.lookup("adc0").unwrap(),
+        e.lookup("twice").unwrap(),
+    );
+    assert_eq!(e.last_update_us(raw), None, "not run yet");
+    e.tick(1_000, &mut b);
+    assert_eq!(e.last_update_us(raw), Some(1_000));
+    // Ticked 3 ms late: the update runs at its due instant (11 000), which is what it reports.
+    e.tick(14_000, &mut b);
+    assert_eq!(e.last_update_us(raw), Some(11_000));
+    assert_eq!(
+        e.last_update_us(volts),
+        Some(11_000),
+        "volts share the raw task"
+    );
+    assert_eq!(
+        e.last_update_us(lazy),
+        None,
+        "bare expressions have no schedule"
+    );
+}

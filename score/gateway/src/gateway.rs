@@ -1,0 +1,443 @@
+//! The gateway loop: connect, handshake, publish, forward commands, reconnect.
+//!
+//! ```text
+//!  board ──score_link──► Link ──Event::Samples──► ClockMap (board µs → host ns)
+//!                                                   └► StatePublisher conductor/score-<board>/<var>
+//!  Controller ──CommandFrame──► CommandReceiver ──► Link::request(Set) ──► board
+//! ```
+//!
+//! The states of a gateway only grow: a variable keeps its state (and index) for the gateway's
+//! lifetime, whatever the board does; a variable that disappears just stops publishing. When a
+//! board comes back with an empty table (power cycle, replug, emulator restart) the gateway
+//! replays the board's last `save` script, so the same states resume.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use conductor_bus::{
+    monotonic_ns, status, Bus, CommandReceiver, StateMeta, StatePublisher, StateSpec,
+};
+use conductor_protocols::score_link::{Request, VERSION};
+
+use crate::clock::ClockMap;
+use crate::error::GatewayError;
+use crate::link::{Answer, BoardVar, Event, Link};
+
+/// How the gateway runs.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The board's link device (its second CDC-ACM port).
+    pub port: PathBuf,
+    /// Subsystem name; default `score-<board name from the hello>`.
+    pub subsystem: Option<String>,
+    /// Highest publish rate asked of the board per variable.
+    pub max_rate_hz: f64,
+    /// Publish rate of bare expressions and constants (they have no rate of their own).
+    pub lazy_rate_hz: f64,
+    /// Replay the last configuration onto a board that comes back empty.
+    pub restore: bool,
+    /// Pause between reconnection attempts.
+    pub retry: Duration,
+    /// Interval of clock pings.
+    pub ping: Duration,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            port: PathBuf::new(),
+            subsystem: None,
+            max_rate_hz: 1000.0,
+            lazy_rate_hz: 10.0,
+            restore: true,
+            retry: Duration::from_millis(200),
+            ping: Duration::from_secs(1),
+        }
+    }
+}
+
+struct VarState {
+    name: String,
+    meta: StateMeta,
+    board_id: Option<u8>,
+    status: u32,
+}
+
+/// Counters for logs and tests.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Stats {
+    /// Successful handshakes.
+    pub connects: u64,
+    /// Samples published.
+    pub published: u64,
+    /// Setpoints forwarded and accepted by the board.
+    pub commands: u64,
+    /// Setpoints refused (read-only, not finite, unknown index, board refusal).
+    pub rejected: u64,
+    /// Configurations replayed onto an empty board.
+    pub restores: u64,
+}
+
+/// One board on the bus.
+pub struct Gateway {
+    opts: Options,
+    bus: Bus,
+    subsystem: Option<String>,
+    states: Vec<VarState>,
+    by_id: HashMap<u8, usize>,
+    publisher: Option<StatePublisher>,
+    commands: Option<CommandReceiver>,
+    clock: ClockMap,
+    generation: Option<u32>,
+    script: Vec<String>,
+    tick: u64,
+    stop: Arc<AtomicBool>,
+    announced: bool,
+    /// Counters.
+    pub stats: Stats,
+}
+
+impl Gateway {
+    /// A gateway on `bus`; `stop` ends [`Gateway::run`].
+    pub fn new(opts: Options, bus: Bus, stop: Arc<AtomicBool>) -> Self {
+        Self {
+            subsystem: opts.subsystem.clone(),
+            opts,
+            bus,
+            states: Vec::new(),
+            by_id: HashMap::new(),
+            publisher: None,
+            commands: None,
+            clock: ClockMap::new(),
+            generation: None,
+            script: Vec::new(),
+            tick: 0,
+            stop,
+            announced: false,
+            stats: Stats::default(),
+        }
+    }
+
+    /// Runs until `stop` is set: connects, serves, and reconnects whenever the link is lost.
+    pub fn run(&mut self) -> Result<(), GatewayError> {
+        let mut last_error = String::new();
+        while !self.stop.load(Ordering::Relaxed) {
+            let r = Link::open(&self.opts.port).and_then(|mut link| self.serve(&mut link));
+            match r {
+                Ok(()) => return Ok(()),
+                Err(e) if e.is_link_loss() || matches!(e, GatewayError::Board { .. }) => {
+                    let msg = e.to_string();
+                    if msg != last_error {
+                        eprintln!("score-gateway: {msg}; retrying every {:?}", self.opts.retry);
+                        last_error = msg;
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+            for s in &mut self.states {
+                s.board_id = None;
+            }
+            self.by_id.clear();
+            self.generation = None;
+            std::thread::sleep(self.opts.retry);
+        }
+        Ok(())
+    }
+
+    fn serve(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+        self.handshake(link)?;
+        let mut last_ping = Instant::now();
+        while !self.stop.load(Ordering::Relaxed) {
+            link.poll()?;
+            while let Some(ev) = link.next_event() {
+                match ev {
+                    Event::Samples { t_us, values, .. } => self.publish(t_us, &values)?,
+                    Event::TableChanged(g) if Some(g) != self.generation => self.sync(link)?,
+                    Event::TableChanged(_) => {}
+                }
+            }
+            self.forward_commands(link)?;
+            if last_ping.elapsed() >= self.opts.ping {
+                self.ping(link)?;
+                last_ping = Instant::now();
+            }
+        }
+        Ok(())
+    }
+
+    fn handshake(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+        let Answer::Hello {
+            board,
+            firmware,
+            number_type,
+            ..
+        } = link.request(Request::Hello)?
+        else {
+            return Err(GatewayError::Protocol("hello: unexpected answer".into()));
+        };
+        let subsystem = self
+            .subsystem
+            .get_or_insert_with(|| format!("score-{board}"))
+            .clone();
+        eprintln!(
+            "score-gateway: {} on {}: {firmware}, numbers {number_type}, protocol {VERSION} -> {subsystem}",
+            board,
+            self.opts.port.display()
+        );
+        self.clock.reset();
+        for _ in 0..4 {
+            self.ping(link)?;
+        }
+        link.request(Request::UnsubscribeAll)?;
+        self.sync(link)?;
+        self.stats.connects += 1;
+        if !self.announced {
+            // For a launcher: the states exist from here on.
+            println!("ready {subsystem} {} states", self.states.len());
+            self.announced = true;
+        }
+        Ok(())
+    }
+
+    fn ping(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+        let h0 = monotonic_ns();
+        if let Answer::Time(b) = link.request(Request::Time)? {
+            self.clock.add(h0, b, monotonic_ns());
+        }
+        Ok(())
+    }
+
+    fn list(link: &mut Link) -> Result<(Vec<BoardVar>, u32), GatewayError> {
+        match link.request(Request::ListVars)? {
+            Answer::Vars(v, g) => Ok((v, g)),
+            other => Err(GatewayError::Protocol(format!(
+                "list: unexpected {other:?}"
+            ))),
+        }
+    }
+
+    fn exec(link: &mut Link, line: &str) -> Result<(String, bool), GatewayError> {
+        match link.request(Request::Exec { line })? {
+            Answer::Exec(text, ok, _) => Ok((text, ok)),
+            other => Err(GatewayError::Protocol(format!(
+                "exec: unexpected {other:?}"
+            ))),
+        }
+    }
+
+    /// Lists the board's table, restores it if the board came back empty, records its script,
+    /// extends the states, and subscribes every variable.
+    fn sync(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+        let (mut vars, mut generation) = Self::list(link)?;
+        if vars.is_empty() && self.opts.restore && !self.script.is_empty() {
+            eprintln!(
+                "score-gateway: the board's table is empty; restoring its last configuration ({} lines)",
+                self.script.len()
+            );
+            for line in self.script.clone() {
+                let (text, ok) = Self::exec(link, &line)?;
+                if !ok {
+                    eprintln!(
+                        "score-gateway: restore stopped at {line:?}: {}",
+                        text.trim()
+                    );
+                    break;
+                }
+            }
+            self.stats.restores += 1;
+            (vars, generation) = Self::list(link)?;
+        }
+        if !vars.is_empty() {
+            let (text, ok) = Self::exec(link, "save")?;
+            if ok {
+                self.script = text
+                    .lines()
+                    .map(str::trim)
+                    .filter(|l| !l.is_empty() && !l.starts_with('#'))
+                    .map(String::from)
+                    .collect();
+            }
+        }
+        self.update_states(&vars)?;
+        for v in &vars {
+            let Some(&i) = self.by_id.get(&v.id) else {
+                continue;
+            };
+            let period = (1e6 / self.states[i].meta.rate_hz).round().max(100.0) as u32;
+            match link.request(Request::Subscribe {
+                id: v.id,
+                period_us: period,
+                generation,
+            }) {
+                Ok(_) => {}
+                // The table changed under us: its TableChanged event will resync.
+                Err(GatewayError::Board { stale: true, .. }) => break,
+                Err(e) => return Err(e),
+            }
+        }
+        self.generation = Some(generation);
+        Ok(())
+    }
+
+    fn meta_for(&self, v: &BoardVar, index: u32) -> StateMeta {
+        let rate = v
+            .rate_hz
+            .map_or(self.opts.lazy_rate_hz, |r| r.min(self.opts.max_rate_hz));
+        let (min, max) = if v.writable && v.unit == "%" {
+            (0.0, 100.0)
+        } else {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        };
+        StateMeta {
+            index,
+            units: v.unit.clone(),
+            writable: v.writable,
+            rate_hz: rate,
+            min,
+            max,
+            device: self.subsystem.clone().unwrap_or_default(),
+        }
+    }
+
+    fn update_states(&mut self, vars: &[BoardVar]) -> Result<(), GatewayError> {
+        for s in &mut self.states {
+            s.board_id = None;
+        }
+        self.by_id.clear();
+        let mut grew = false;
+        for v in vars {
+            if conductor_bus::naming::validate("state", &v.name).is_err() {
+                eprintln!(
+                    "score-gateway: variable {:?} cannot be a state name; not published",
+                    v.name
+                );
+                continue;
+            }
+            let i = match self.states.iter().position(|s| s.name == v.name) {
+                Some(i) => {
+                    let fresh = self.meta_for(v, i as u32);
+                    let s = &self.states[i];
+                    if (fresh.units != s.meta.units
+                        || fresh.writable != s.meta.writable
+                        || fresh.rate_hz != s.meta.rate_hz)
+                        && self.publisher.is_some()
+                    {
+                        eprintln!(
+                            "score-gateway: {} changed (units {:?}, rate {} Hz, writable {}); its state keeps the first metadata",
+                            v.name, fresh.units, fresh.rate_hz, fresh.writable
+                        );
+                    }
+                    i
+                }
+                None => {
+                    let meta = self.meta_for(v, self.states.len() as u32);
+                    self.states.push(VarState {
+                        name: v.name.clone(),
+                        meta,
+                        board_id: None,
+                        status: 0,
+                    });
+                    grew = true;
+                    self.states.len() - 1
+                }
+            };
+            self.states[i].board_id = Some(v.id);
+            self.by_id.insert(v.id, i);
+        }
+        let subsystem = self.subsystem.clone().unwrap_or_else(|| "score".into());
+        if grew || self.publisher.is_none() {
+            let specs: Vec<StateSpec> = self
+                .states
+                .iter()
+                .map(|s| StateSpec::new(s.name.clone(), s.meta.clone()))
+                .collect();
+            // The new publisher reopens the existing services (same attributes) before the old
+            // one is dropped, so subscribers never see a state vanish.
+            let p = StatePublisher::create(&self.bus, &subsystem, &specs)?;
+            self.publisher = Some(p);
+        }
+        if self.commands.is_none() {
+            self.commands = Some(CommandReceiver::create(&self.bus, &subsystem)?);
+        }
+        Ok(())
+    }
+
+    fn publish(&mut self, t_us: u64, values: &[(u8, f64)]) -> Result<(), GatewayError> {
+        let Some(p) = self.publisher.as_mut() else {
+            return Ok(());
+        };
+        // Never stamp a sample in the future (the fit extrapolates between pings).
+        let t_ns = self.clock.to_host_ns(t_us).min(monotonic_ns());
+        let mut any = false;
+        for &(id, v) in values {
+            if let Some(&i) = self.by_id.get(&id) {
+                p.publish(i, self.tick, t_ns, v, self.states[i].status)?;
+                self.stats.published += 1;
+                any = true;
+            }
+        }
+        if any {
+            p.notify_tick()?;
+            self.tick += 1;
+        }
+        Ok(())
+    }
+
+    fn forward_commands(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+        let Some(rx) = self.commands.as_mut() else {
+            return Ok(());
+        };
+        let mut pending: Vec<(u32, f64)> = Vec::new();
+        rx.drain(|frame| {
+            pending.extend(frame.setpoints().iter().map(|s| (s.index, s.value)));
+        })?;
+        for (index, value) in pending {
+            let Some(s) = self.states.get_mut(index as usize) else {
+                self.stats.rejected += 1;
+                continue;
+            };
+            if !s.meta.writable || !value.is_finite() {
+                s.status |= status::REJECTED;
+                self.stats.rejected += 1;
+                continue;
+            }
+            let (v, clamped) = s.meta.clamp(value);
+            let Some(id) = s.board_id else {
+                s.status |= status::REJECTED;
+                self.stats.rejected += 1;
+                continue;
+            };
+            let generation = self.generation.unwrap_or(0);
+            match link.request(Request::Set {
+                id,
+                value: v,
+                generation,
+            }) {
+                Ok(_) => {
+                    let s = &mut self.states[index as usize];
+                    s.status &= !(status::REJECTED | status::CLAMPED);
+                    if clamped {
+                        s.status |= status::CLAMPED;
+                    }
+                    self.stats.commands += 1;
+                }
+                Err(GatewayError::Board { stale, message }) => {
+                    eprintln!(
+                        "score-gateway: set {} = {v}: {message}",
+                        self.states[index as usize].name
+                    );
+                    self.states[index as usize].status |= status::REJECTED;
+                    self.stats.rejected += 1;
+                    if stale {
+                        self.sync(link)?;
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,175 @@
+//! score-gateway against the firmware in the emulator: a separate process (this test) sees the
+//! board's ADC on the bus, commands a PWM duty that is measured at the pin, and the gateway
+//! survives the board being unplugged and plugged back (the emulator killed and restarted).
+//!
+//! Needs the firmware ELF (`score-fw build`) and the harness (`npm ci` in
+//! score/firmware/emulator); fails with a message saying how to get them.
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc::{channel, Receiver};
+use std::time::{Duration, Instant};
+
+use conductor_bus::{Bus, Controller, Domain, StateSubscriber};
+use score_firmware_tools::emulator::{fresh_pty_paths, Emulator};
+use score_firmware_tools::port::Port;
+
+const WAIT: Duration = Duration::from_secs(30);
+
+struct Gw {
+    child: Child,
+    stdout: Receiver<String>,
+}
+
+impl Gw {
+    fn spawn(link: &Path, domain: &Domain) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_score-gateway"))
+            .arg("--port")
+            .arg(link)
+            .env("CONDUCTOR_DOMAIN", domain.name())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("score-gateway starts");
+        let out = child.stdout.take().unwrap();
+        let (tx, rx) = channel();
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines().map_while(Result::ok) {
+                let _ = tx.send(l);
+            }
+        });
+        Self { child, stdout: rx }
+    }
+
+    fn ready(&self) -> String {
+        let l = self
+            .stdout
+            .recv_timeout(WAIT)
+            .expect("gateway reports ready");
+        assert!(l.starts_with("ready "), "{l}");
+        l
+    }
+}
+
+impl Drop for Gw {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn configure(emu: &mut Emulator, lines: &[&str]) {
+    let mut t = Port::open(&emu.term, WAIT).unwrap();
+    emu.dtr("term", true).unwrap();
+    t.read_until_suffix("$> ", WAIT).unwrap();
+    for l in lines {
+        t.write_all(format!("{l}\r").as_bytes()).unwrap();
+        let out = t.read_until_suffix("$> ", WAIT).unwrap();
+        assert!(!out.contains("error"), "{l}: {out}");
+    }
+}
+
+/// Waits for a sample whose value satisfies `ok`; returns it.
+fn wait_for(sub: &mut StateSubscriber, what: &str, ok: impl Fn(f64) -> bool) -> f64 {
+    let end = Instant::now() + WAIT;
+    let mut last = None;
+    while Instant::now() < end {
+        while let Some(s) = sub.receive().unwrap() {
+            last = Some(s.value);
+            if ok(s.value) {
+                assert!(
+                    s.t_sample_ns <= s.t_publish_ns,
+                    "sampled after publishing: {s:?}"
+                );
+                return s.value;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    panic!("{what}: no matching sample within {WAIT:?} (last {last:?})");
+}
+
+/// ADC volts as the board computes them: code · 3.3 / 4095 in f32 (< 1e-6 V of rounding).
+fn volts(code: u16) -> f64 {
+    code as f64 * 3.3 / 4095.0
+}
+
+#[test]
+fn adc_on_the_bus_pwm_from_a_controller_and_replug() {
+    let (term, link) = fresh_pty_paths().unwrap();
+    let mut emu = Emulator::start_at(&term, &link).unwrap_or_else(|e| panic!("{e}"));
+    configure(&mut emu, &["adc 0 100", "pwm 4 1000 10"]);
+    let domain = Domain::unique("scoregw").unwrap();
+    let gw = Gw::spawn(&link, &domain);
+    let ready = gw.ready();
+    assert_eq!(ready, "ready score-rp2040 3 states");
+
+    let bus = Bus::open(&domain, "score-gateway-test").unwrap();
+    let mut adc0 = StateSubscriber::new(&bus, "score-rp2040/adc0").unwrap();
+    let meta = &adc0.info().meta;
+    assert_eq!(
+        (meta.units.as_str(), meta.rate_hz, meta.writable),
+        ("V", 100.0, false)
+    );
+    for v in [0.8, 2.2, 3.0] {
+        let code = emu.set_adc_volts(0, v).unwrap();
+        wait_for(&mut adc0, &format!("adc0 = {v} V"), |x| {
+            (x - volts(code)).abs() < 2e-6
+        });
+    }
+
+    // A controller sets the writable PWM duty; the pin follows (1 kHz: 62 500 counts).
+    let mut ctl = Controller::new(&bus);
+    ctl.add_ctrl("score-rp2040/PWM4", 75.0).unwrap();
+    assert_eq!(ctl.send_ctrl().unwrap(), 1);
+    let end = Instant::now() + WAIT;
+    loop {
+        let m = emu.measure_pwm(4, 4).unwrap();
+        if (m.duty - 0.75).abs() * 62_500.0 <= 1.0 {
+            break;
+        }
+        assert!(Instant::now() < end, "PWM4 never reached 75 % (last {m:?})");
+    }
+    let mut pwm4 = StateSubscriber::new(&bus, "score-rp2040/PWM4").unwrap();
+    wait_for(&mut pwm4, "PWM4 = 75 %", |x| (x - 75.0).abs() < 1e-3);
+    // A read-only state refuses setpoints at the controller already.
+    assert!(ctl.add_ctrl("score-rp2040/adc0", 1.0).is_err());
+
+    // A variable typed on the terminal while the gateway runs becomes a state too.
+    let mut t = Port::open(&emu.term, WAIT).unwrap();
+    t.write_all(b"defexp k 5\r").unwrap();
+    t.read_until_suffix("$> ", WAIT).unwrap();
+    drop(t);
+    let end = Instant::now() + WAIT;
+    let mut k = loop {
+        match StateSubscriber::new(&bus, "score-rp2040/k") {
+            Ok(s) => break s,
+            Err(e) if Instant::now() > end => panic!("k never became a state: {e}"),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    };
+    assert_eq!(
+        (k.info().meta.rate_hz, k.info().meta.writable),
+        (10.0, true)
+    );
+    wait_for(&mut k, "k = 5", |x| x == 5.0);
+
+    // Unplug: the board disappears; plug back in: a fresh board with an empty table.
+    emu.kill();
+    std::thread::sleep(Duration::from_millis(300));
+    // Nothing is published while the board is away: what is queued is from before.
+    while k.receive().unwrap().is_some() {}
+    let mut emu = Emulator::start_at(&term, &link).unwrap_or_else(|e| panic!("{e}"));
+    let code = emu.set_adc_volts(0, 1.2).unwrap();
+    // The gateway reconnects, restores the configuration and publishing resumes on the same
+    // state (the subscriber from before the replug).
+    wait_for(&mut adc0, "adc0 after replug", |x| {
+        (x - volts(code)).abs() < 2e-6
+    });
+    let m = emu.measure_pwm(4, 4).unwrap();
+    assert!(
+        m.periods == 4 && (m.period_ns.unwrap() - 1e6).abs() < 1.0,
+        "PWM4 restored: {m:?}"
+    );
+}
