@@ -2,8 +2,10 @@
 //! in seconds on a fresh machine.
 //!
 //! * `setup` — installs what the test suite needs and the machine may lack: the Python venv with
-//!   the interop packages (`tools/python-requirements.txt`) and the `thumbv6m-none-eabi` target.
-//! * `test`  — `setup`, then every test of the workspace, the f32 build of Score, and the no_std
+//!   the interop packages (`tools/python-requirements.txt`), the `thumbv6m-none-eabi` target,
+//!   socat (Debian) and the emulator harness's npm packages (`npm ci`).
+//! * `test`  — `setup`, then the Score firmware build, every test of the workspace (the firmware
+//!   tests boot that image in the rp2040js emulator), the f32 build of Score, and the no_std
 //!   crates built for the RP2040's Cortex-M0+.
 
 use std::path::{Path, PathBuf};
@@ -59,11 +61,69 @@ fn setup() -> Result<Vec<(String, String)>> {
     let t = Instant::now();
     let python = python_venv()?;
     rust_target(THUMB)?;
+    debian_tools(&[("socat", "socat")])?;
+    npm_ci(&root().join("score/firmware/emulator"))?;
     eprintln!("xtask: setup done in {:.1} s", t.elapsed().as_secs_f64());
     Ok(vec![(
         "CONDUCTOR_PYTHON".into(),
         python.display().to_string(),
     )])
+}
+
+/// Installs Debian packages whose command is missing (the emulator harness bridges USB CDC to
+/// pseudo-terminals with socat).
+fn debian_tools(tools: &[(&str, &str)]) -> Result {
+    let missing: Vec<&str> = tools
+        .iter()
+        .filter(|(cmd, _)| {
+            !Command::new("sh")
+                .args(["-c", &format!("command -v {cmd}")])
+                .output()
+                .is_ok_and(|o| o.status.success())
+        })
+        .map(|(_, pkg)| *pkg)
+        .collect();
+    if missing.is_empty() {
+        return Ok(());
+    }
+    let sudo: &[&str] = if is_root() { &[] } else { &["sudo"] };
+    let apt = |args: &[&str]| {
+        let mut all: Vec<&str> = sudo.to_vec();
+        all.push("apt-get");
+        all.extend_from_slice(args);
+        let mut c = Command::new(all[0]);
+        c.args(&all[1..]).env("DEBIAN_FRONTEND", "noninteractive");
+        run(&mut c)
+    };
+    if apt(&[&["install", "-y", "-q"][..], &missing].concat()).is_err() {
+        // A fresh machine may have no package lists yet.
+        apt(&["update", "-q"])?;
+        apt(&[&["install", "-y", "-q"][..], &missing].concat())?;
+    }
+    Ok(())
+}
+
+fn is_root() -> bool {
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
+}
+
+/// `npm ci` in `dir` (the emulator harness pins rp2040js), unless node_modules matches the lock.
+fn npm_ci(dir: &Path) -> Result {
+    let lock = dir.join("package-lock.json");
+    let stamp = dir.join("node_modules/.package-lock.json");
+    let fresh = match (std::fs::metadata(&lock), std::fs::metadata(&stamp)) {
+        (Ok(l), Ok(s)) => s.modified().ok() >= l.modified().ok(),
+        _ => false,
+    };
+    if fresh {
+        return Ok(());
+    }
+    run(Command::new("npm")
+        .current_dir(dir)
+        .args(["ci", "--no-audit", "--no-fund"]))
 }
 
 /// The RP2040's target: Cortex-M0+, no FPU.
@@ -144,6 +204,21 @@ fn test() -> Result {
             THUMB,
             "-p",
             "conductor-protocols",
+        ],
+    )?;
+    // The Score firmware image (ELF + UF2) that the emulator tests boot.
+    cargo(
+        &root,
+        &env,
+        &[
+            "run",
+            "--locked",
+            "-p",
+            "score-firmware-tools",
+            "--bin",
+            "score-fw",
+            "--",
+            "build",
         ],
     )?;
     cargo(&root, &env, &["test", "--workspace", "--locked"])?;
