@@ -1,6 +1,22 @@
 //! # conductor-executor
 //!
-//! The manifest, the real-time executor (one process per subsystem) and the launcher.
+//! What the user runs: a **manifest** describes the robot; one **executor** process per
+//! subsystem keeps every State current at its rate on a real-time thread; the **launcher**
+//! validates the manifest, starts and supervises the executors.
+//!
+//! * [`manifest`] — the TOML model and its validator (every error with its location).
+//! * [`stages`] — the tick scheduler over the `conductor-devices` stage traits.
+//! * [`executor`] — the stages on the bus, and the absolute-deadline loop.
+//! * [`schedule`], [`rt`], [`signals`] — deadlines, real-time set-up, stop requests.
+//! * [`process`] — the `conductor-executor` program.
+//!
+//! See the crate's README for the data flow of one tick.
 #![warn(missing_docs)]
 
+pub mod executor;
 pub mod manifest;
+pub mod process;
+pub mod rt;
+pub mod schedule;
+pub mod signals;
+pub mod stages;
