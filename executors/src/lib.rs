@@ -9,14 +9,20 @@
 //! * [`executor`] — the stages on the bus, and the absolute-deadline loop.
 //! * [`schedule`], [`rt`], [`signals`] — deadlines, real-time set-up, stop requests.
 //! * [`process`] — the `conductor-executor` program.
+//! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
+//! * [`stress`] — the thesis' stress test (sine states and an external logger).
+//! * [`cleanup`] — the domain's iceoryx2 nodes, and removing what dead ones left behind.
 //!
 //! See the crate's README for the data flow of one tick.
 #![warn(missing_docs)]
 
+pub mod cleanup;
 pub mod executor;
+pub mod launcher;
 pub mod manifest;
 pub mod process;
 pub mod rt;
 pub mod schedule;
 pub mod signals;
 pub mod stages;
+pub mod stress;

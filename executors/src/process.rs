@@ -115,10 +115,18 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
         }
     };
     let require_rt = args.require_rt || sub.require_rt;
+    if require_rt && args.no_rt {
+        eprintln!(
+            "{tag}: subsystem {:?} requires real time (require_rt = true in the manifest) but \
+             --no-rt was given; drop --no-rt or set require_rt = false",
+            sub.name
+        );
+        return EXIT_CONFIG;
+    }
 
     // The per-thread pool of the allocation-free bus variant, before any port exists.
     prepare_thread();
-    let bus = match Bus::open(&domain, &format!("executor/{}", sub.name)) {
+    let bus = match Bus::open(&domain, &crate::cleanup::executor_node_name(&sub.name)) {
         Ok(b) => b,
         Err(e) => {
             eprintln!("{tag}: {e}");
