@@ -11,12 +11,14 @@
 //! * [`process`] — the `conductor-executor` program.
 //! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
 //! * [`stress`] — the thesis' stress test (sine states and an external logger).
+//! * [`demo`] — the mini-Hubo demo's gait and PID (the `conductor-demo` program).
 //! * [`cleanup`] — the domain's iceoryx2 nodes, and removing what dead ones left behind.
 //!
 //! See the crate's README for the data flow of one tick.
 #![warn(missing_docs)]
 
 pub mod cleanup;
+pub mod demo;
 pub mod executor;
 pub mod launcher;
 pub mod manifest;
