@@ -1,15 +1,16 @@
 //! The demo end to end: the simulated mini-Hubo leg launched as a real executor process, the
 //! PID controller in the demo process, tracking errors against the linear theory.
 
+mod support;
+
 use std::process::Command;
 
-use conductor_bus::Domain;
 use conductor_executor::demo::{error_ratio, gait_rms, GAINS};
 use conductor_executor::stress::parse_line;
 
 #[test]
 fn the_leg_tracks_the_gait_and_the_pid_beats_the_open_loop_as_predicted() {
-    let d = Domain::unique("demo").unwrap();
+    let (d, _guard) = support::private_domain("demo");
     // 6 s of tracking: 3 s per phase, of which the last 2 s (one whole gait cycle, so the RMS
     // of each joint's sinusoidal error is exact) are measured.
     let out = Command::new(env!("CARGO_BIN_EXE_conductor-demo"))

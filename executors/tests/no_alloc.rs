@@ -1,11 +1,13 @@
 //! After start-up, the executor's tick (drain commands, run every stage, publish samples, notify
 //! the tick, publish stats) allocates nothing: 10 000 ticks under a counting allocator.
 
+mod support;
+
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use conductor_bus::{prepare_thread, Bus, Controller, Domain, StateSubscriber, StatsSubscriber};
+use conductor_bus::{prepare_thread, Bus, Controller, StateSubscriber, StatsSubscriber};
 use conductor_executor::executor::Executor;
 use conductor_executor::manifest::Manifest;
 use conductor_executor::schedule::Wake;
@@ -63,7 +65,7 @@ fn ten_thousand_ticks_allocate_nothing() {
     sub.watchdog_ns = Some(50_000_000);
 
     prepare_thread();
-    let domain = Domain::unique("exec-noalloc").unwrap();
+    let (domain, _guard) = support::private_domain("noalloc");
     let bus = Bus::open(&domain, "executor/arm").unwrap();
     let mut exec = Executor::new(&bus, &sub).unwrap();
     let mut ctl = Controller::new(&bus);

@@ -11,7 +11,7 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use conductor_bus::{status, Bus, Controller, Domain, StatsSubscriber};
+use conductor_bus::{status, Bus, Controller, StatsSubscriber};
 use conductor_executor::launcher::{Launch, LaunchError};
 use conductor_executor::stress::parse_line;
 use nix::sys::signal::{kill, Signal};
@@ -26,7 +26,7 @@ fn misses(bus: &Bus, subsystem: &str) -> u64 {
 
 #[test]
 fn an_external_subscriber_sees_every_state_at_its_rate() {
-    let d = Domain::unique("rates").unwrap();
+    let (d, _guard) = private_domain("rates");
     let launch = Launch::start(&test_manifest("two-subsystems.toml"), options(&d)).unwrap();
     let states = [
         "arm/j0",
@@ -76,7 +76,7 @@ fn an_external_subscriber_sees_every_state_at_its_rate() {
 
 #[test]
 fn a_frame_of_six_setpoints_is_applied_in_one_tick() {
-    let d = Domain::unique("frame").unwrap();
+    let (d, _guard) = private_domain("frame");
     let launch = Launch::start(&test_manifest("two-subsystems.toml"), options(&d)).unwrap();
     let names = ["arm/j0", "arm/j1", "arm/j2", "arm/j3", "arm/j4", "arm/j5"];
     let rec = Recorder::start(&d, &names);
@@ -116,7 +116,7 @@ fn a_frame_of_six_setpoints_is_applied_in_one_tick() {
 
 #[test]
 fn a_killed_executor_is_restarted_and_the_other_subsystem_never_stops() {
-    let d = Domain::unique("restart").unwrap();
+    let (d, _guard) = private_domain("restart");
     let launch = Launch::start(&test_manifest("two-subsystems.toml"), options(&d)).unwrap();
     let rec = Recorder::start(&d, &["sensors/a", "arm/j0"]);
     std::thread::sleep(Duration::from_millis(200));
@@ -175,7 +175,7 @@ fn a_killed_executor_is_restarted_and_the_other_subsystem_never_stops() {
 
 #[test]
 fn sigterm_stops_every_executor_cleanly_and_leaves_nothing_behind() {
-    let d = Domain::unique("sigterm").unwrap();
+    let (d, _guard) = private_domain("sigterm");
     let mut launcher = Command::new(LAUNCHER)
         .arg(test_manifest("two-subsystems.toml"))
         .args(["--domain", d.name(), "--quiet"])
@@ -243,7 +243,7 @@ min = -1.0
 max = 1.0
 "#;
     let path = temp_manifest("watchdog", text);
-    let d = Domain::unique("watchdog").unwrap();
+    let (d, _guard) = private_domain("watchdog");
     let launch = Launch::start(&path, options(&d)).unwrap();
     let rec = Recorder::start(&d, &["arm/q"]);
     let bus = Bus::open(&d, "test-controller").unwrap();
@@ -294,7 +294,7 @@ max = 1.0
 
 #[test]
 fn crashing_more_often_than_allowed_ends_the_launch_with_the_reason() {
-    let d = Domain::unique("crashes").unwrap();
+    let (d, _guard) = private_domain("crashes");
     let mut opts = options(&d);
     opts.only = vec!["sensors".into()];
     opts.max_restarts = 1;
@@ -327,7 +327,7 @@ fn crashing_more_often_than_allowed_ends_the_launch_with_the_reason() {
 #[test]
 fn launches_that_cannot_run_fail_with_the_reason() {
     // An invalid manifest: nothing starts, every error is reported.
-    let d = Domain::unique("cannot").unwrap();
+    let (d, _guard) = private_domain("cannot");
     let bad = temp_manifest("bad", "system = \"x\"\n[subsystems.a]\nrate_hz = 0\n");
     match Launch::start(&bad, options(&d)) {
         Err(LaunchError::Manifest(e)) => assert!(e.to_string().contains("rate_hz"), "{e}"),

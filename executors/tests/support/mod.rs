@@ -162,3 +162,32 @@ pub fn alive(pid: u32) -> bool {
 pub fn now_ns() -> u64 {
     monotonic_ns()
 }
+
+/// Removes a private test domain's last files when dropped (after everything in it stopped):
+/// iceoryx2's per-domain node counter in /dev/shm and the empty record directories.
+pub struct DomainGuard(pub Domain);
+
+impl Drop for DomainGuard {
+    fn drop(&mut self) {
+        let Ok(scan) = conductor_executor::cleanup::scan_and_clean(&self.0) else {
+            return;
+        };
+        if !scan.alive.is_empty() {
+            return;
+        }
+        // SAFETY: the domain is private to this test (`Domain::unique`) and no process of it is
+        // alive, which is the precondition of removing its node counter.
+        let _ = unsafe {
+            iceoryx2::testing::remove_global_mgmt_segment::<conductor_bus::RtIpc>(
+                self.0.iceoryx2_config(),
+            )
+        };
+        let _ = std::fs::remove_dir_all(self.0.root_path());
+    }
+}
+
+/// A fresh private domain, cleaned up when the guard drops.
+pub fn private_domain(tag: &str) -> (Domain, DomainGuard) {
+    let d = Domain::unique(tag).unwrap();
+    (d.clone(), DomainGuard(d))
+}
