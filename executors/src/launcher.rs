@@ -290,7 +290,7 @@ impl Launch {
             }
         }
         if scan.removed > 0 {
-            eprintln!(
+            note!(
                 "conductor: removed the stale resources of {} dead process(es) in domain {:?}",
                 scan.removed,
                 domain.name()
@@ -549,7 +549,7 @@ impl Supervisor {
         }
         c.output = Some(std::thread::spawn(move || {
             for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                eprintln!("{line}");
+                note!("{line}");
                 if let Ok(mut t) = tail.lock() {
                     if t.len() == TAIL_LINES {
                         t.pop_front();
@@ -596,7 +596,7 @@ impl Supervisor {
                             since: Instant::now(),
                         };
                         let pid = c.proc.as_ref().map(Child::id);
-                        eprintln!(
+                        note!(
                             "conductor: subsystem {} ready (pid {})",
                             c.subsystem,
                             pid.map_or("?".into(), |p| p.to_string())
@@ -715,7 +715,7 @@ impl Supervisor {
                     let _ = scan_and_clean(&self.domain);
                     let c = &mut self.children[i];
                     c.restarts += 1;
-                    eprintln!(
+                    note!(
                         "conductor: restarting subsystem {} (restart {}, after {})",
                         c.subsystem,
                         c.restarts,
@@ -781,7 +781,7 @@ impl Supervisor {
             .backoff
             .saturating_mul(1 << (c.consecutive - 1).min(16))
             .min(self.opts.backoff_max);
-        eprintln!(
+        note!(
             "conductor: subsystem {} stopped unexpectedly ({}); restarting in {:?}",
             c.subsystem,
             describe(&status),
@@ -867,7 +867,7 @@ impl Supervisor {
         for i in 0..self.children.len() {
             self.set_info(i, None, false);
         }
-        eprintln!("conductor: {} executor(s) stopped", self.children.len());
+        note!("conductor: {} executor(s) stopped", self.children.len());
         if !failures.is_empty() {
             return Err(LaunchError::Unclean { failures });
         }

@@ -17,6 +17,17 @@
 //! See the crate's README for the data flow of one tick.
 #![warn(missing_docs)]
 
+/// `eprintln!` that ignores a closed stderr (a launcher that went away must not make an executor
+/// panic while it puts its devices in their safe state).
+#[macro_export]
+#[doc(hidden)]
+macro_rules! note {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
 pub mod cleanup;
 pub mod demo;
 pub mod executor;

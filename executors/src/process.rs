@@ -79,7 +79,7 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
     };
     let stop = Stop::new();
     if let Err(e) = signals::install(&stop) {
-        eprintln!("conductor-executor: cannot set up signal handling: {e}");
+        note!("conductor-executor: cannot set up signal handling: {e}");
         return ExitCode::from(EXIT_FAILURE);
     }
     ExitCode::from(execute(&args, &stop))
@@ -90,7 +90,7 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     let manifest = match Manifest::load(&args.manifest) {
         Ok(m) => m,
         Err(e) => {
-            eprintln!("{tag}: {e}");
+            note!("{tag}: {e}");
             return EXIT_CONFIG;
         }
     };
@@ -100,7 +100,7 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
             .iter()
             .map(|s| s.name.as_str())
             .collect();
-        eprintln!(
+        note!(
             "{tag}: the manifest has no subsystem {:?}; expected one of: {}",
             args.subsystem,
             names.join(", ")
@@ -110,13 +110,13 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     let domain = match resolve_domain(args.domain.as_deref(), &manifest) {
         Ok(d) => d,
         Err(e) => {
-            eprintln!("{tag}: {e}");
+            note!("{tag}: {e}");
             return EXIT_CONFIG;
         }
     };
     let require_rt = args.require_rt || sub.require_rt;
     if require_rt && args.no_rt {
-        eprintln!(
+        note!(
             "{tag}: subsystem {:?} requires real time (require_rt = true in the manifest) but \
              --no-rt was given; drop --no-rt or set require_rt = false",
             sub.name
@@ -129,14 +129,14 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     let bus = match Bus::open(&domain, &crate::cleanup::executor_node_name(&sub.name)) {
         Ok(b) => b,
         Err(e) => {
-            eprintln!("{tag}: {e}");
+            note!("{tag}: {e}");
             return EXIT_FAILURE;
         }
     };
     let mut exec = match Executor::new(&bus, sub) {
         Ok(x) => x,
         Err(e) => {
-            eprintln!("{tag}: {e}");
+            note!("{tag}: {e}");
             return EXIT_FAILURE;
         }
     };
@@ -152,17 +152,17 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     };
     if !status.problems.is_empty() {
         if require_rt {
-            eprintln!("{tag}: real time is required (require_rt) but not available:");
+            note!("{tag}: real time is required (require_rt) but not available:");
             for p in &status.problems {
-                eprintln!("  - {p}");
+                note!("  - {p}");
             }
             return EXIT_NO_RT;
         }
         for p in &status.problems {
-            eprintln!("{tag}: warning: running without full real-time guarantees: {p}");
+            note!("{tag}: warning: running without full real-time guarantees: {p}");
         }
     }
-    eprintln!(
+    note!(
         "{tag}: {} states at {} Hz in domain {:?}, {}",
         sub.states.len(),
         sub.rate_hz,
@@ -178,7 +178,7 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     let last = run(&mut exec, sub.period_ns, sub.spin_ns, stop.flag());
     exec.shutdown(sub.period_ns, last + 1);
     let (ticks, misses) = exec.ticks_and_misses();
-    eprintln!(
+    note!(
         "{tag}: stopped after {ticks} ticks ({misses} missed deadlines, lateness p99 {} µs); \
          devices in their safe state",
         exec.lateness().quantile(0.99) / 1000

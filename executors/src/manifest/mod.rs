@@ -8,6 +8,7 @@
 
 mod diag;
 mod reader;
+pub mod reference;
 mod validate;
 
 use std::path::{Path, PathBuf};
