@@ -5,8 +5,8 @@
 //! deadline loop until SIGINT/SIGTERM, then puts every device in its safe state and exits 0.
 //!
 //! Exit status: 0 orderly stop; 1 a runtime failure (worth a restart); 2 a configuration error
-//! (bad arguments or manifest, unknown subsystem: restarting cannot help); 3 real time required
-//! but not permitted.
+//! (bad arguments or manifest, unknown subsystem, the subsystem already runs in the domain:
+//! restarting cannot help); 3 real time required but not permitted.
 
 use std::ffi::OsString;
 use std::io::Write as _;
@@ -124,9 +124,27 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
         return EXIT_CONFIG;
     }
 
+    // One executor per subsystem and domain: a second one would publish on the same services.
+    // (This also removes what dead processes left in the domain.)
+    let node = crate::cleanup::executor_node_name(&sub.name);
+    match crate::cleanup::scan_and_clean(&domain) {
+        Ok(scan) => {
+            if let Some(n) = scan.alive.iter().find(|n| n.name == node) {
+                note!(
+                    "{tag}: subsystem {:?} already runs in domain {:?} (process {}); stop it \
+                     first or use another domain",
+                    sub.name,
+                    domain.name(),
+                    n.pid.map_or("?".into(), |p| p.to_string())
+                );
+                return EXIT_CONFIG;
+            }
+        }
+        Err(e) => note!("{tag}: warning: {e}"),
+    }
     // The per-thread pool of the allocation-free bus variant, before any port exists.
     prepare_thread();
-    let bus = match Bus::open(&domain, &crate::cleanup::executor_node_name(&sub.name)) {
+    let bus = match Bus::open(&domain, &node) {
         Ok(b) => b,
         Err(e) => {
             note!("{tag}: {e}");

@@ -373,6 +373,15 @@ fn launches_that_cannot_run_fail_with_the_reason() {
         }
         other => panic!("unexpected: {other:?}"),
     }
+    // An executor started by hand refuses too (it would publish on the same services).
+    let out = Command::new(EXECUTOR)
+        .arg("--manifest")
+        .arg(test_manifest("two-subsystems.toml"))
+        .args(["--subsystem", "sensors", "--domain", d.name()])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("already runs"));
     first.stop();
     first.wait().unwrap();
     let _ = std::fs::remove_file(bad);
