@@ -192,6 +192,10 @@ impl Stages {
 
     /// Schedules already-built components: `links[i]` realises `sub.protocols[i]` with its
     /// hardware, `devices[i]` realises `sub.devices[i]`. (Tests use it to observe the stages.)
+    ///
+    /// # Panics
+    ///
+    /// If the numbers of links or devices differ from the manifest's protocols or devices.
     pub fn from_parts(
         sub: &Subsystem,
         links: Vec<Box<dyn Link>>,
