@@ -1,0 +1,539 @@
+//! The supervisor thread: spawns the executors, waits for their readiness, restarts crashed ones
+//! with back-off, draws the summary, and stops them in order.
+
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, IsTerminal, Write as _};
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::PathBuf;
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::mpsc::{Receiver, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use conductor_bus::{Bus, Domain, StatsSubscriber};
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+
+use super::{ExecutorInfo, LaunchError, LaunchOptions, LaunchReport, SubsystemReport};
+use crate::cleanup::scan_and_clean;
+use crate::process::{EXIT_CONFIG, EXIT_NO_RT, READY};
+use crate::signals::Stop;
+
+enum EventKind {
+    Ready,
+}
+
+struct Event {
+    child: usize,
+    generation: u64,
+    kind: EventKind,
+}
+
+enum Phase {
+    Starting { since: Instant },
+    Running { since: Instant },
+    Waiting { until: Instant, last: ExitStatus },
+    Stopped,
+}
+
+struct ChildRt {
+    subsystem: String,
+    proc: Option<Child>,
+    phase: Phase,
+    generation: u64,
+    crashes: VecDeque<Instant>,
+    consecutive: u32,
+    restarts: u32,
+    tail: Arc<Mutex<VecDeque<String>>>,
+    /// Forwards the executor's stderr; ends at EOF, i.e. once the process is gone.
+    output: Option<JoinHandle<()>>,
+    exit: Option<ExitStatus>,
+}
+
+impl ChildRt {
+    /// Waits (briefly) until everything the exited process wrote has been forwarded.
+    fn drain_output(&mut self) {
+        if let Some(t) = self.output.take() {
+            let until = Instant::now() + Duration::from_secs(1);
+            while !t.is_finished() && Instant::now() < until {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            if t.is_finished() {
+                let _ = t.join();
+            }
+        }
+    }
+}
+
+pub(super) struct Supervisor {
+    opts: LaunchOptions,
+    manifest: PathBuf,
+    domain: Domain,
+    stop: Stop,
+    info: Arc<Mutex<Vec<ExecutorInfo>>>,
+    children: Vec<ChildRt>,
+    events: (Sender<Event>, Receiver<Event>),
+}
+
+const TAIL_LINES: usize = 12;
+const POLL: Duration = Duration::from_millis(20);
+/// A run this long resets the back-off.
+const STABLE: Duration = Duration::from_secs(30);
+
+fn describe(status: &ExitStatus) -> String {
+    match (status.code(), status.signal()) {
+        (Some(c), _) => format!("exit status {c}"),
+        (None, Some(s)) => format!(
+            "killed by signal {}",
+            Signal::try_from(s).map_or(s.to_string(), |s| s.as_str().to_string())
+        ),
+        _ => status.to_string(),
+    }
+}
+
+impl Supervisor {
+    pub(super) fn new(
+        opts: LaunchOptions,
+        manifest: PathBuf,
+        domain: Domain,
+        stop: Stop,
+        info: Arc<Mutex<Vec<ExecutorInfo>>>,
+    ) -> Self {
+        Self {
+            opts,
+            manifest,
+            domain,
+            stop,
+            info,
+            children: Vec::new(),
+            events: std::sync::mpsc::channel(),
+        }
+    }
+
+    pub(super) fn run(
+        mut self,
+        subsystems: Vec<String>,
+        ready: Sender<()>,
+    ) -> Result<LaunchReport, LaunchError> {
+        for s in subsystems {
+            self.children.push(ChildRt {
+                subsystem: s,
+                proc: None,
+                phase: Phase::Stopped,
+                generation: 0,
+                crashes: VecDeque::new(),
+                consecutive: 0,
+                restarts: 0,
+                tail: Arc::new(Mutex::new(VecDeque::new())),
+                output: None,
+                exit: None,
+            });
+        }
+        // Start everything and wait for every READY.
+        for i in 0..self.children.len() {
+            if let Err(e) = self.spawn(i) {
+                let _ = self.stop_all();
+                return Err(e);
+            }
+        }
+        if let Err(e) = self.await_initial_readiness() {
+            let _ = self.stop_all();
+            return Err(e);
+        }
+        let _ = ready.send(());
+        drop(ready);
+        let result = self.supervise();
+        let stopped = self.stop_all();
+        result.and(stopped)
+    }
+
+    fn spawn(&mut self, i: usize) -> Result<(), LaunchError> {
+        let c = &mut self.children[i];
+        c.generation += 1;
+        let mut cmd = Command::new(&self.opts.executor);
+        cmd.args(&self.opts.executor_args)
+            .arg("--manifest")
+            .arg(&self.manifest)
+            .arg("--subsystem")
+            .arg(&c.subsystem)
+            .arg("--domain")
+            .arg(self.domain.name())
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            // Its own process group: a terminal's Ctrl-C reaches only the launcher, which
+            // forwards it once.
+            .process_group(0);
+        if self.opts.no_rt {
+            cmd.arg("--no-rt");
+        }
+        // SAFETY: the closure runs in the forked child before exec and only makes the
+        // async-signal-safe prctl(2) system call.
+        unsafe {
+            cmd.pre_exec(|| {
+                // The executor stops (orderly) if the launcher dies.
+                nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
+            });
+        }
+        let mut child = cmd.spawn().map_err(|source| LaunchError::Spawn {
+            subsystem: c.subsystem.clone(),
+            program: self.opts.executor.clone(),
+            source,
+        })?;
+        let stdout = child.stdout.take().expect("piped");
+        let stderr = child.stderr.take().expect("piped");
+        let (tx, generation) = (self.events.0.clone(), c.generation);
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if line.trim() == READY {
+                    let _ = tx.send(Event {
+                        child: i,
+                        generation,
+                        kind: EventKind::Ready,
+                    });
+                }
+            }
+        });
+        let tail = c.tail.clone();
+        if let Ok(mut t) = c.tail.lock() {
+            t.clear();
+        }
+        c.output = Some(std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                note!("{line}");
+                if let Ok(mut t) = tail.lock() {
+                    if t.len() == TAIL_LINES {
+                        t.pop_front();
+                    }
+                    t.push_back(line);
+                }
+            }
+        }));
+        let pid = child.id();
+        c.proc = Some(child);
+        c.phase = Phase::Starting {
+            since: Instant::now(),
+        };
+        self.set_info(i, Some(pid), false);
+        Ok(())
+    }
+
+    fn set_info(&self, i: usize, pid: Option<u32>, ready: bool) {
+        if let Ok(mut v) = self.info.lock() {
+            v[i].pid = pid;
+            v[i].ready = ready;
+            v[i].restarts = self.children[i].restarts;
+        }
+    }
+
+    fn tail(&self, i: usize) -> Vec<String> {
+        self.children[i]
+            .tail
+            .lock()
+            .map(|t| t.iter().cloned().collect())
+            .unwrap_or_default()
+    }
+
+    fn handle_events(&mut self) {
+        while let Ok(ev) = self.events.1.try_recv() {
+            let c = &mut self.children[ev.child];
+            if ev.generation != c.generation {
+                continue;
+            }
+            match ev.kind {
+                EventKind::Ready => {
+                    if matches!(c.phase, Phase::Starting { .. }) {
+                        c.phase = Phase::Running {
+                            since: Instant::now(),
+                        };
+                        let pid = c.proc.as_ref().map(Child::id);
+                        note!(
+                            "conductor: subsystem {} ready (pid {})",
+                            c.subsystem,
+                            pid.map_or("?".into(), |p| p.to_string())
+                        );
+                        self.set_info(ev.child, pid, true);
+                    }
+                }
+            }
+        }
+    }
+
+    fn await_initial_readiness(&mut self) -> Result<(), LaunchError> {
+        loop {
+            self.handle_events();
+            for i in 0..self.children.len() {
+                let c = &mut self.children[i];
+                let Phase::Starting { since } = c.phase else {
+                    continue;
+                };
+                if let Some(status) = c.proc.as_mut().and_then(|p| p.try_wait().ok().flatten()) {
+                    c.proc = None;
+                    c.phase = Phase::Stopped;
+                    c.drain_output();
+                    let code = status.code().map(|c| c as u8);
+                    let output = self.tail(i);
+                    let subsystem = self.children[i].subsystem.clone();
+                    return Err(if matches!(code, Some(EXIT_CONFIG) | Some(EXIT_NO_RT)) {
+                        LaunchError::CannotRun {
+                            subsystem,
+                            status: describe(&status),
+                            output,
+                        }
+                    } else {
+                        LaunchError::NotReady {
+                            subsystem,
+                            status: describe(&status),
+                            output,
+                        }
+                    });
+                }
+                if since.elapsed() > self.opts.ready_timeout {
+                    return Err(LaunchError::NotReady {
+                        subsystem: c.subsystem.clone(),
+                        status: format!("no READY within {:?}", self.opts.ready_timeout),
+                        output: self.tail(i),
+                    });
+                }
+            }
+            if self
+                .children
+                .iter()
+                .all(|c| matches!(c.phase, Phase::Running { .. }))
+            {
+                return Ok(());
+            }
+            if self.stop.requested() {
+                return Err(LaunchError::NotReady {
+                    subsystem: "(all)".into(),
+                    status: "stop requested during start-up".into(),
+                    output: Vec::new(),
+                });
+            }
+            std::thread::sleep(POLL);
+        }
+    }
+
+    fn supervise(&mut self) -> Result<(), LaunchError> {
+        let bus = Bus::open(&self.domain, "launcher").ok();
+        let mut stats: Vec<Option<StatsSubscriber>> = self
+            .children
+            .iter()
+            .map(|c| {
+                bus.as_ref()
+                    .and_then(|b| StatsSubscriber::new(b, &c.subsystem).ok())
+            })
+            .collect();
+        let tty = std::io::stderr().is_terminal();
+        let interval = self.opts.summary_interval.unwrap_or(if tty {
+            Duration::from_secs(1)
+        } else {
+            Duration::from_secs(10)
+        });
+        let mut next_summary = Instant::now() + interval;
+        let mut drawn = 0usize;
+        while !self.stop.requested() {
+            self.handle_events();
+            let now = Instant::now();
+            for i in 0..self.children.len() {
+                self.check_child(i, now)?;
+            }
+            if !self.opts.quiet && now >= next_summary {
+                if let Some(bus) = &bus {
+                    let lines = self.summary(bus, &mut stats);
+                    let mut err = std::io::stderr().lock();
+                    if tty && drawn > 0 {
+                        // Redraw the previous block in place.
+                        let _ = write!(err, "\x1b[{drawn}A");
+                    }
+                    for l in &lines {
+                        let _ = writeln!(err, "{l}{}", if tty { "\x1b[K" } else { "" });
+                    }
+                    drawn = lines.len();
+                }
+                next_summary = now + interval;
+            }
+            std::thread::sleep(POLL);
+        }
+        Ok(())
+    }
+
+    fn check_child(&mut self, i: usize, now: Instant) -> Result<(), LaunchError> {
+        match self.children[i].phase {
+            Phase::Waiting { until, last } => {
+                if now >= until {
+                    // Whatever the dead process left behind must go before its successor starts.
+                    let _ = scan_and_clean(&self.domain);
+                    let c = &mut self.children[i];
+                    c.restarts += 1;
+                    note!(
+                        "conductor: restarting subsystem {} (restart {}, after {})",
+                        c.subsystem,
+                        c.restarts,
+                        describe(&last)
+                    );
+                    self.spawn(i)?;
+                }
+                return Ok(());
+            }
+            Phase::Stopped => return Ok(()),
+            Phase::Starting { since } if now.duration_since(since) > self.opts.ready_timeout => {
+                // Hung before READY: treat it as a crash.
+                if let Some(p) = self.children[i].proc.as_mut() {
+                    let _ = p.kill();
+                }
+            }
+            Phase::Running { since } if now.duration_since(since) > STABLE => {
+                self.children[i].consecutive = 0;
+            }
+            _ => {}
+        }
+        let c = &mut self.children[i];
+        let Some(status) = c.proc.as_mut().and_then(|p| p.try_wait().ok().flatten()) else {
+            return Ok(());
+        };
+        c.proc = None;
+        let code = status.code().map(|c| c as u8);
+        if matches!(code, Some(EXIT_CONFIG) | Some(EXIT_NO_RT)) {
+            c.phase = Phase::Stopped;
+            c.drain_output();
+            self.set_info(i, None, false);
+            return Err(LaunchError::CannotRun {
+                subsystem: self.children[i].subsystem.clone(),
+                status: describe(&status),
+                output: self.tail(i),
+            });
+        }
+        // A crash (or an exit nobody asked for): restart with back-off, within bounds.
+        let window = self.opts.restart_window;
+        c.crashes.push_back(now);
+        while c
+            .crashes
+            .front()
+            .is_some_and(|t| now.duration_since(*t) > window)
+        {
+            c.crashes.pop_front();
+        }
+        if c.crashes.len() as u32 > self.opts.max_restarts {
+            c.phase = Phase::Stopped;
+            let crashes = c.crashes.len() as u32;
+            c.drain_output();
+            return Err(LaunchError::TooManyRestarts {
+                subsystem: self.children[i].subsystem.clone(),
+                crashes,
+                window,
+                status: describe(&status),
+                output: self.tail(i),
+            });
+        }
+        c.consecutive += 1;
+        let delay = self
+            .opts
+            .backoff
+            .saturating_mul(1 << (c.consecutive - 1).min(16))
+            .min(self.opts.backoff_max);
+        note!(
+            "conductor: subsystem {} stopped unexpectedly ({}); restarting in {:?}",
+            c.subsystem,
+            describe(&status),
+            delay
+        );
+        c.phase = Phase::Waiting {
+            until: now + delay,
+            last: status,
+        };
+        self.set_info(i, None, false);
+        Ok(())
+    }
+
+    fn summary(&self, bus: &Bus, stats: &mut [Option<StatsSubscriber>]) -> Vec<String> {
+        let mut lines = Vec::new();
+        for (i, c) in self.children.iter().enumerate() {
+            if stats[i].is_none() {
+                stats[i] = StatsSubscriber::new(bus, &c.subsystem).ok();
+            }
+            let s = stats[i].as_mut().and_then(|s| s.latest().ok().flatten());
+            let state = match c.phase {
+                Phase::Running { .. } => "",
+                Phase::Starting { .. } => " (starting)",
+                Phase::Waiting { .. } => " (restarting)",
+                Phase::Stopped => " (stopped)",
+            };
+            lines.push(match s {
+                Some(s) => format!(
+                    "conductor: {:<16} {:>9.1} Hz of {}  lateness p99 {:>7.1} µs  max {:>8.1} µs  \
+                     misses {}  bus errors {}  restarts {}{state}",
+                    c.subsystem,
+                    s.achieved_rate_hz,
+                    s.base_rate_hz,
+                    s.lateness_p99_ns as f64 / 1e3,
+                    s.lateness_max_ns as f64 / 1e3,
+                    s.misses,
+                    s.bus_errors,
+                    c.restarts
+                ),
+                None => format!("conductor: {:<16} (no stats yet){state}", c.subsystem),
+            });
+        }
+        lines
+    }
+
+    /// Stops every executor (forwarding the signal that asked for it), waits, kills stragglers,
+    /// removes what they left behind.
+    fn stop_all(&mut self) -> Result<LaunchReport, LaunchError> {
+        let sig = Signal::try_from(self.stop.signal()).unwrap_or(Signal::SIGTERM);
+        for c in &self.children {
+            if let Some(p) = &c.proc {
+                let _ = kill(Pid::from_raw(p.id() as i32), sig);
+            }
+        }
+        let deadline = Instant::now() + self.opts.stop_timeout;
+        let mut failures = Vec::new();
+        for c in &mut self.children {
+            let Some(mut p) = c.proc.take() else { continue };
+            let status = loop {
+                match p.try_wait() {
+                    Ok(Some(s)) => break Some(s),
+                    Ok(None) if Instant::now() < deadline => std::thread::sleep(POLL),
+                    _ => {
+                        let _ = p.kill();
+                        failures.push(format!(
+                            "{}: did not stop within {:?}, killed",
+                            c.subsystem, self.opts.stop_timeout
+                        ));
+                        break p.wait().ok();
+                    }
+                }
+            };
+            c.drain_output();
+            if let Some(s) = status {
+                if !s.success() && !failures.iter().any(|f| f.starts_with(&c.subsystem)) {
+                    failures.push(format!("{}: {}", c.subsystem, describe(&s)));
+                }
+                c.exit = Some(s);
+            }
+            c.phase = Phase::Stopped;
+        }
+        let _ = scan_and_clean(&self.domain);
+        for i in 0..self.children.len() {
+            self.set_info(i, None, false);
+        }
+        note!("conductor: {} executor(s) stopped", self.children.len());
+        if !failures.is_empty() {
+            return Err(LaunchError::Unclean { failures });
+        }
+        Ok(LaunchReport {
+            domain: self.domain.name().into(),
+            subsystems: self
+                .children
+                .iter()
+                .map(|c| SubsystemReport {
+                    subsystem: c.subsystem.clone(),
+                    restarts: c.restarts,
+                    exit_code: c.exit.and_then(|s| s.code()),
+                })
+                .collect(),
+        })
+    }
+}

@@ -1,0 +1,41 @@
+//! # conductor-executor
+//!
+//! What the user runs: a **manifest** describes the robot; one **executor** process per
+//! subsystem keeps every State current at its rate on a real-time thread; the **launcher**
+//! validates the manifest, starts and supervises the executors.
+//!
+//! * [`manifest`] — the TOML model and its validator (every error with its location).
+//! * [`stages`] — the tick scheduler over the `conductor-devices` stage traits.
+//! * [`executor`] — the stages on the bus, and the absolute-deadline loop.
+//! * [`schedule`], [`rt`], [`signals`] — deadlines, real-time set-up, stop requests.
+//! * [`process`] — the `conductor-executor` program.
+//! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
+//! * [`stress`] — the thesis' stress test (sine states and an external logger).
+//! * [`demo`] — the mini-Hubo demo's gait and PID (the `conductor-demo` program).
+//! * [`cleanup`] — the domain's iceoryx2 nodes, and removing what dead ones left behind.
+//!
+//! See the crate's README for the data flow of one tick.
+#![warn(missing_docs)]
+
+/// `eprintln!` that ignores a closed stderr (a launcher that went away must not make an executor
+/// panic while it puts its devices in their safe state).
+#[macro_export]
+#[doc(hidden)]
+macro_rules! note {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+pub mod cleanup;
+pub mod demo;
+pub mod executor;
+pub mod launcher;
+pub mod manifest;
+pub mod process;
+pub mod rt;
+pub mod schedule;
+pub mod signals;
+pub mod stages;
+pub mod stress;

@@ -1,0 +1,205 @@
+//! The executor process: `conductor-executor --manifest M --subsystem S`.
+//!
+//! It loads and validates the manifest, joins the bus domain, builds the subsystem on its
+//! real-time thread (the main thread), sets up real time, prints `READY` on stdout, runs the
+//! deadline loop until SIGINT/SIGTERM, then puts every device in its safe state and exits 0.
+//!
+//! Exit status: 0 orderly stop; 1 a runtime failure (worth a restart); 2 a configuration error
+//! (bad arguments or manifest, unknown subsystem, the subsystem already runs in the domain:
+//! restarting cannot help); 3 real time required but not permitted.
+
+use std::ffi::OsString;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use conductor_bus::{prepare_thread, Bus, Domain};
+
+use crate::executor::{run, Executor};
+use crate::manifest::Manifest;
+use crate::rt::{self, RtRequest};
+use crate::signals::{self, Stop};
+
+/// Exit status of an orderly stop.
+pub const EXIT_OK: u8 = 0;
+/// Exit status of a runtime failure.
+pub const EXIT_FAILURE: u8 = 1;
+/// Exit status of a configuration error.
+pub const EXIT_CONFIG: u8 = 2;
+/// Exit status when real time is required but not permitted.
+pub const EXIT_NO_RT: u8 = 3;
+
+/// The line printed on stdout once the executor's services exist and its loop starts.
+pub const READY: &str = "READY";
+
+/// Command line of the executor.
+#[derive(Debug, Parser)]
+#[command(
+    name = "conductor-executor",
+    version,
+    about = "Runs one subsystem of a Conductor manifest in real time"
+)]
+pub struct ExecutorArgs {
+    /// The manifest (TOML).
+    #[arg(long)]
+    pub manifest: PathBuf,
+    /// The subsystem to run.
+    #[arg(long)]
+    pub subsystem: String,
+    /// Bus domain (default: the manifest's `domain`, else $CONDUCTOR_DOMAIN, else "default").
+    #[arg(long)]
+    pub domain: Option<String>,
+    /// Do not attempt real-time set-up (normal scheduling, no pinning, no memory lock).
+    #[arg(long, conflicts_with = "require_rt")]
+    pub no_rt: bool,
+    /// Refuse to run without real time, whatever the manifest says.
+    #[arg(long)]
+    pub require_rt: bool,
+}
+
+/// The domain to use: explicit choice, else the manifest's, else `CONDUCTOR_DOMAIN`, else the
+/// default.
+pub fn resolve_domain(explicit: Option<&str>, manifest: &Manifest) -> Result<Domain, String> {
+    let d = match (explicit, manifest.domain.as_deref()) {
+        (Some(d), _) | (None, Some(d)) => Domain::new(d),
+        (None, None) => Domain::from_env(),
+    };
+    d.map_err(|e| e.to_string())
+}
+
+/// Runs the executor with `args` (program name first) and returns its exit status.
+pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
+    let args = match ExecutorArgs::try_parse_from(args) {
+        Ok(a) => a,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { EXIT_CONFIG } else { 0 });
+        }
+    };
+    let stop = Stop::new();
+    if let Err(e) = signals::install(&stop) {
+        note!("conductor-executor: cannot set up signal handling: {e}");
+        return ExitCode::from(EXIT_FAILURE);
+    }
+    ExitCode::from(execute(&args, &stop))
+}
+
+fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
+    let tag = format!("conductor-executor[{}]", args.subsystem);
+    let manifest = match Manifest::load(&args.manifest) {
+        Ok(m) => m,
+        Err(e) => {
+            note!("{tag}: {e}");
+            return EXIT_CONFIG;
+        }
+    };
+    let Some(sub) = manifest.subsystem(&args.subsystem) else {
+        let names: Vec<&str> = manifest
+            .subsystems
+            .iter()
+            .map(|s| s.name.as_str())
+            .collect();
+        note!(
+            "{tag}: the manifest has no subsystem {:?}; expected one of: {}",
+            args.subsystem,
+            names.join(", ")
+        );
+        return EXIT_CONFIG;
+    };
+    let domain = match resolve_domain(args.domain.as_deref(), &manifest) {
+        Ok(d) => d,
+        Err(e) => {
+            note!("{tag}: {e}");
+            return EXIT_CONFIG;
+        }
+    };
+    let require_rt = args.require_rt || sub.require_rt;
+    if require_rt && args.no_rt {
+        note!(
+            "{tag}: subsystem {:?} requires real time (require_rt = true in the manifest) but \
+             --no-rt was given; drop --no-rt or set require_rt = false",
+            sub.name
+        );
+        return EXIT_CONFIG;
+    }
+
+    // One executor per subsystem and domain: a second one would publish on the same services.
+    // (This also removes what dead processes left in the domain.)
+    let node = crate::cleanup::executor_node_name(&sub.name);
+    match crate::cleanup::scan_and_clean(&domain) {
+        Ok(scan) => {
+            if let Some(n) = scan.alive.iter().find(|n| n.name == node) {
+                note!(
+                    "{tag}: subsystem {:?} already runs in domain {:?} (process {}); stop it \
+                     first or use another domain",
+                    sub.name,
+                    domain.name(),
+                    n.pid.map_or("?".into(), |p| p.to_string())
+                );
+                return EXIT_CONFIG;
+            }
+        }
+        Err(e) => note!("{tag}: warning: {e}"),
+    }
+    // The per-thread pool of the allocation-free bus variant, before any port exists.
+    prepare_thread();
+    let bus = match Bus::open(&domain, &node) {
+        Ok(b) => b,
+        Err(e) => {
+            note!("{tag}: {e}");
+            return EXIT_FAILURE;
+        }
+    };
+    let mut exec = match Executor::new(&bus, sub) {
+        Ok(x) => x,
+        Err(e) => {
+            note!("{tag}: {e}");
+            return EXIT_FAILURE;
+        }
+    };
+
+    let status = if args.no_rt {
+        rt::RtStatus::default()
+    } else {
+        rt::setup(RtRequest {
+            priority: Some(sub.priority),
+            cpu: sub.cpu,
+            lock_memory: true,
+        })
+    };
+    if !status.problems.is_empty() {
+        if require_rt {
+            note!("{tag}: real time is required (require_rt) but not available:");
+            for p in &status.problems {
+                note!("  - {p}");
+            }
+            return EXIT_NO_RT;
+        }
+        for p in &status.problems {
+            note!("{tag}: warning: running without full real-time guarantees: {p}");
+        }
+    }
+    note!(
+        "{tag}: {} states at {} Hz in domain {:?}, {}",
+        sub.states.len(),
+        sub.rate_hz,
+        domain.name(),
+        status.summary()
+    );
+    exec.set_rt_status(status);
+
+    let mut out = std::io::stdout();
+    if writeln!(out, "{READY}").and_then(|_| out.flush()).is_err() {
+        // Nobody reads our stdout any more (the launcher is gone): still run.
+    }
+    let last = run(&mut exec, sub.period_ns, sub.spin_ns, stop.flag());
+    exec.shutdown(sub.period_ns, last + 1);
+    let (ticks, misses) = exec.ticks_and_misses();
+    note!(
+        "{tag}: stopped after {ticks} ticks ({misses} missed deadlines, lateness p99 {} µs); \
+         devices in their safe state",
+        exec.lateness().quantile(0.99) / 1000
+    );
+    EXIT_OK
+}

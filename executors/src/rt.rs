@@ -1,0 +1,227 @@
+//! Real-time set-up of the executor thread: CPU affinity, locked memory, pre-faulted stack,
+//! SCHED_FIFO priority. Each step that is not permitted yields a [`RtProblem`] that says how to
+//! grant it; the caller warns and carries on, or refuses to run when real time is required.
+
+use std::fmt;
+
+use nix::sys::mman::{mlockall, MlockAllFlags};
+use nix::sys::resource::{getrlimit, Resource, RLIM_INFINITY};
+
+/// What real-time set-up to attempt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RtRequest {
+    /// SCHED_FIFO priority (1–99); `None` leaves normal scheduling.
+    pub priority: Option<i32>,
+    /// CPU to pin to.
+    pub cpu: Option<usize>,
+    /// Lock all current and future memory.
+    pub lock_memory: bool,
+}
+
+/// One step that could not be done, with the fix.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RtProblem {
+    /// What failed.
+    pub what: String,
+    /// How to make it work.
+    pub fix: String,
+}
+
+impl fmt::Display for RtProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}; {}", self.what, self.fix)
+    }
+}
+
+/// What the set-up achieved.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct RtStatus {
+    /// The thread runs SCHED_FIFO.
+    pub fifo: bool,
+    /// The priority in effect (when `fifo`).
+    pub priority: i32,
+    /// The CPU the thread is pinned to.
+    pub cpu: Option<usize>,
+    /// Memory is locked.
+    pub memory_locked: bool,
+    /// Steps that failed.
+    pub problems: Vec<RtProblem>,
+}
+
+impl RtStatus {
+    /// One line for the log: `SCHED_FIFO 80 on CPU 1, memory locked`.
+    pub fn summary(&self) -> String {
+        let sched = if self.fifo {
+            format!("SCHED_FIFO {}", self.priority)
+        } else {
+            "normal scheduling".into()
+        };
+        let cpu = self
+            .cpu
+            .map_or_else(|| "any CPU".to_string(), |c| format!("CPU {c}"));
+        let mem = if self.memory_locked {
+            "memory locked"
+        } else {
+            "memory not locked"
+        };
+        format!("{sched} on {cpu}, {mem}")
+    }
+}
+
+/// Pins the calling thread to `cpu`.
+pub fn pin_to_cpu(cpu: usize) -> Result<(), RtProblem> {
+    let ids = core_affinity::get_core_ids().unwrap_or_default();
+    let Some(id) = ids.iter().find(|c| c.id == cpu) else {
+        let avail: Vec<String> = ids.iter().map(|c| c.id.to_string()).collect();
+        return Err(RtProblem {
+            what: format!("cannot pin to CPU {cpu}: it is not available to this process"),
+            fix: format!(
+                "choose one of the CPUs this process may use ({}) in the manifest's `cpu`",
+                avail.join(", ")
+            ),
+        });
+    };
+    if core_affinity::set_for_current(*id) {
+        Ok(())
+    } else {
+        Err(RtProblem {
+            what: format!("cannot pin to CPU {cpu}: sched_setaffinity failed"),
+            fix: "check the process's CPU set (taskset, cgroup cpuset)".into(),
+        })
+    }
+}
+
+/// Locks all current and future pages in RAM (so the loop never takes a page fault), when the
+/// memory-lock limit allows it.
+pub fn lock_memory() -> Result<(), RtProblem> {
+    // With MCL_FUTURE, every later allocation counts against RLIMIT_MEMLOCK: under a finite
+    // limit and without CAP_IPC_LOCK, a later allocation could fail. Only lock when unlimited.
+    let (soft, _) = getrlimit(Resource::RLIMIT_MEMLOCK).unwrap_or((0, 0));
+    let root = nix::unistd::geteuid().is_root();
+    if soft != RLIM_INFINITY && !root {
+        return Err(RtProblem {
+            what: format!("memory not locked: RLIMIT_MEMLOCK is {soft} bytes"),
+            fix: "raise it (`ulimit -l unlimited`, LimitMEMLOCK=infinity in a systemd unit, or \
+                  `@realtime - memlock unlimited` in /etc/security/limits.conf) or grant \
+                  CAP_IPC_LOCK"
+                .into(),
+        });
+    }
+    mlockall(MlockAllFlags::MCL_CURRENT | MlockAllFlags::MCL_FUTURE).map_err(|e| RtProblem {
+        what: format!("mlockall failed: {e}"),
+        fix: "grant CAP_IPC_LOCK or raise RLIMIT_MEMLOCK (`ulimit -l unlimited`)".into(),
+    })
+}
+
+/// Touches `bytes` of stack below the caller so the loop never faults a stack page in.
+#[inline(never)]
+pub fn prefault_stack(bytes: usize) {
+    const CHUNK: usize = 64 * 1024;
+    fn touch(depth: usize) {
+        let mut buf = [0u8; CHUNK];
+        // Volatile writes: the pages are really touched, not optimised away.
+        for i in (0..CHUNK).step_by(4096) {
+            // SAFETY: `i < CHUNK`, so the pointer is inside `buf`.
+            unsafe { core::ptr::write_volatile(buf.as_mut_ptr().add(i), 1) };
+        }
+        if depth > 1 {
+            touch(depth - 1);
+        }
+        std::hint::black_box(&buf);
+    }
+    touch(bytes.div_ceil(CHUNK).max(1));
+}
+
+/// Switches the calling thread to SCHED_FIFO at `priority`.
+pub fn set_fifo(priority: i32) -> Result<(), RtProblem> {
+    let param = libc::sched_param {
+        sched_priority: priority,
+    };
+    // SAFETY: pthread_self() is the calling thread; `param` is a valid sched_param for the call.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    if rc == 0 {
+        return Ok(());
+    }
+    let (rtprio, _) = getrlimit(Resource::RLIMIT_RTPRIO).unwrap_or((0, 0));
+    Err(RtProblem {
+        what: format!(
+            "cannot use SCHED_FIFO priority {priority}: {} (RLIMIT_RTPRIO is {})",
+            nix::errno::Errno::from_raw(rc).desc(),
+            if rtprio == RLIM_INFINITY {
+                "unlimited".to_string()
+            } else {
+                rtprio.to_string()
+            }
+        ),
+        fix: "grant it: run as root, `sudo setcap cap_sys_nice,cap_ipc_lock+ep \
+              $(which conductor-executor)`, or raise the real-time priority limit (`ulimit -r 99`, \
+              LimitRTPRIO=99 in a systemd unit, `@realtime - rtprio 99` in \
+              /etc/security/limits.conf); see deploy/ for the RT tuning guide"
+            .into(),
+    })
+}
+
+/// Runs the requested set-up steps in order (affinity, memory lock, stack, priority) and reports
+/// what took effect. Call it on the real-time thread, after building everything it will use.
+pub fn setup(req: RtRequest) -> RtStatus {
+    let mut st = RtStatus::default();
+    if let Some(cpu) = req.cpu {
+        match pin_to_cpu(cpu) {
+            Ok(()) => st.cpu = Some(cpu),
+            Err(p) => st.problems.push(p),
+        }
+    }
+    if req.lock_memory {
+        match lock_memory() {
+            Ok(()) => st.memory_locked = true,
+            Err(p) => st.problems.push(p),
+        }
+    }
+    prefault_stack(256 * 1024);
+    if let Some(prio) = req.priority {
+        match set_fifo(prio) {
+            Ok(()) => {
+                st.fifo = true;
+                st.priority = prio;
+            }
+            Err(p) => st.problems.push(p),
+        }
+    }
+    st
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pinning_to_a_missing_cpu_says_which_exist() {
+        let e = pin_to_cpu(100_000).unwrap_err();
+        assert!(e.what.contains("CPU 100000"), "{e}");
+        assert!(e.fix.contains("choose one of"), "{e}");
+    }
+
+    #[test]
+    fn an_invalid_priority_is_refused_with_the_fix() {
+        // 0 is never a valid SCHED_FIFO priority, privileged or not.
+        let e = set_fifo(0).unwrap_err();
+        assert!(e.what.contains("SCHED_FIFO priority 0"), "{e}");
+        assert!(e.fix.contains("rtprio"), "{e}");
+    }
+
+    #[test]
+    fn summary_reads_well() {
+        let s = RtStatus {
+            fifo: true,
+            priority: 80,
+            cpu: Some(1),
+            memory_locked: true,
+            problems: vec![],
+        };
+        assert_eq!(s.summary(), "SCHED_FIFO 80 on CPU 1, memory locked");
+        assert_eq!(
+            RtStatus::default().summary(),
+            "normal scheduling on any CPU, memory not locked"
+        );
+    }
+}

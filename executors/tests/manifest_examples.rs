@@ -1,0 +1,118 @@
+//! The manifests shipped in deploy/ and used by the tests validate, with the structure they claim.
+
+use conductor_executor::manifest::{Manifest, SafeSpec};
+
+fn root() -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .unwrap()
+        .to_path_buf()
+}
+
+fn load(rel: &str) -> Manifest {
+    Manifest::load(root().join(rel)).unwrap_or_else(|e| panic!("{rel}:\n{e}"))
+}
+
+#[test]
+fn minihubo_right_leg_matches_the_thesis_arrangement() {
+    let m = load("deploy/minihubo-right-leg.toml");
+    assert_eq!(m.system, "minihubo");
+    assert_eq!(m.subsystems.len(), 1);
+    let leg = &m.subsystems[0];
+    assert_eq!(leg.name, "right_leg");
+    assert_eq!(leg.period_ns, 2_000_000);
+    let names: Vec<&str> = leg.states.iter().map(|s| s.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["RAR", "RAP", "RKP", "RHR", "RHP", "RHY", "Fz", "Mx", "My"]
+    );
+    // Fig. 3.2: six joint devices on the Robotis protocol over UART1, three sensor channels on
+    // the ADC protocol over UART2.
+    let proto_of = |s: &str| {
+        let st = leg.states.iter().find(|x| x.name == s).unwrap();
+        let dev = &leg.devices[st.device];
+        let p = &leg.protocols[dev.protocol];
+        (p.name.as_str(), leg.hardware[p.hardware].name.as_str())
+    };
+    for j in &names[..6] {
+        assert_eq!(proto_of(j), ("robotis", "uart1"), "{j}");
+    }
+    for f in &names[6..] {
+        assert_eq!(proto_of(f), ("adc", "uart2"), "{f}");
+    }
+    // Fig. 3.3: Device("dRAR", 5, 250, "Robotis", 46, 2.61, -1).
+    let rar = &leg.devices[leg.states[0].device];
+    assert_eq!((rar.name.as_str(), rar.credential.id), ("dRAR", 46));
+    assert_eq!(leg.rate_of(rar.divisor), 250.0);
+    assert_eq!(rar.calibration.offset, 2.61);
+    assert_eq!(rar.calibration.direction, -1.0);
+    assert_eq!(rar.safe, SafeSpec::Hold);
+    assert!(leg.states[..6]
+        .iter()
+        .all(|s| s.writable && s.units == "rad"));
+    assert!(leg.states[6..].iter().all(|s| !s.writable));
+    assert_eq!(leg.rate_of(leg.states[6].divisor), 100.0);
+    assert_eq!(leg.watchdog_ns, Some(500_000_000));
+    assert!((0..leg.states.len()).all(|i| leg.state_is_simulated(i)));
+}
+
+#[test]
+fn the_test_manifest_has_two_subsystems_at_several_rates() {
+    let m = load("executors/tests/manifests/two-subsystems.toml");
+    let arm = m.subsystem("arm").unwrap();
+    let sensors = m.subsystem("sensors").unwrap();
+    assert_eq!(arm.states.len(), 6);
+    let j5 = &arm.states[5];
+    // Calibration inherited from nothing (device defaults) and overridden on the state.
+    assert_eq!(
+        (
+            j5.calibration.scale,
+            j5.calibration.offset,
+            j5.calibration.direction
+        ),
+        (2.0, 0.5, -1.0)
+    );
+    let rates: Vec<f64> = sensors
+        .states
+        .iter()
+        .map(|s| sensors.rate_of(s.divisor))
+        .collect();
+    assert_eq!(rates, [250.0, 125.0, 50.0]);
+}
+
+#[test]
+fn setpoint_safe_action_resolves_its_state() {
+    let text = r#"
+system = "bot"
+[subsystems.leg]
+rate_hz = 100
+[subsystems.leg.hardware.bus]
+kind = "loopback"
+[subsystems.leg.protocols.p]
+kind = "sim"
+hardware = "bus"
+[subsystems.leg.devices.d]
+kind = "sim"
+protocol = "p"
+id = 1
+safe_action = "setpoint"
+safe_value = 0.25
+[subsystems.leg.states.sensor_like]
+device = "d"
+writable = true
+"#;
+    let m = Manifest::parse(text, "inline.toml").unwrap();
+    let leg = &m.subsystems[0];
+    assert_eq!(
+        leg.devices[0].safe,
+        SafeSpec::Setpoint {
+            state: 0,
+            value: 0.25
+        }
+    );
+    // Defaults: base rate for every stage, sleep-only, no watchdog, priority 80, unbounded.
+    assert_eq!(leg.devices[0].divisor, 1);
+    assert_eq!((leg.spin_ns, leg.watchdog_ns, leg.priority), (0, None, 80));
+    assert_eq!(leg.states[0].min, f64::NEG_INFINITY);
+    assert_eq!(leg.states[0].history, 256);
+}
