@@ -45,8 +45,12 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
     let text = std::fs::read_to_string(root.join("deploy/minihubo-right-leg-dxl.toml")).unwrap();
     assert!(text.contains("port = \"/tmp/conductor-dxl0\""));
-    let text = text.replace("port = \"/tmp/conductor-dxl0\"", &format!("port = \"{port}\""));
-    let manifest = std::env::temp_dir().join(format!("conductor-dxl-e2e-{}.toml", std::process::id()));
+    let text = text.replace(
+        "port = \"/tmp/conductor-dxl0\"",
+        &format!("port = \"{port}\""),
+    );
+    let manifest =
+        std::env::temp_dir().join(format!("conductor-dxl-e2e-{}.toml", std::process::id()));
     std::fs::write(&manifest, text).unwrap();
 
     let d = Domain::unique("dxl-e2e").unwrap();
@@ -62,7 +66,10 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
     let mut line = String::new();
     while !line.contains("READY") {
         line.clear();
-        assert!(out.read_line(&mut line).unwrap() > 0, "executor exited before READY");
+        assert!(
+            out.read_line(&mut line).unwrap() > 0,
+            "executor exited before READY"
+        );
     }
 
     let bus = Bus::open(&d, "e2e").unwrap();
@@ -103,7 +110,11 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
     // Less than the manifest's 500 ms watchdog, whose hold would be the next SYNC WRITE.
     std::thread::sleep(Duration::from_millis(300));
     let after = sim.sim().stats();
-    assert_eq!(after.sync_write - before.sync_write, 1, "one SYNC WRITE moved all 6");
+    assert_eq!(
+        after.sync_write - before.sync_write,
+        1,
+        "one SYNC WRITE moved all 6"
+    );
     // 10 + addr/len 4 + 6 × (id + 4 bytes).
     assert_eq!(after.sync_write_bytes - before.sync_write_bytes, 44);
     {
@@ -131,7 +142,11 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
     // the SYNC WRITEs counted above.
     drop(exec);
     let s = sim.sim().stats();
-    assert_eq!(s.packets_in, s.sync_read + s.sync_write, "nothing else was sent: {s:?}");
+    assert_eq!(
+        s.packets_in,
+        s.sync_read + s.sync_write,
+        "nothing else was sent: {s:?}"
+    );
     assert_eq!(s.bytes_in, s.sync_read * 20 + s.sync_write_bytes, "{s:?}");
     assert_eq!(s.bytes_out, s.sync_read * 90, "{s:?}");
     assert_eq!(s.discarded_in, 0);

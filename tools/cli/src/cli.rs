@@ -7,6 +7,7 @@ use clap::{Args, Parser, Subcommand};
 
 const EXAMPLES: &str = "\
 Examples:
+  conductor launch deploy/minihubo-right-leg.toml one executor per subsystem, supervised
   conductor list                                  every state of the domain with its metadata
   conductor get leg/knee                          latest sample of one state
   conductor set leg/knee 0.5                      send a setpoint (refused outside the limits)
@@ -38,6 +39,22 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Validate a manifest and run one real-time executor per subsystem until Ctrl-C/SIGTERM.
+    #[command(
+        after_help = "Every manifest error is reported with file, line and column before \
+anything starts. Executors that crash are restarted with back-off; SIGINT/SIGTERM stop them in order
+(devices go to their safe state).
+
+Examples:\n  conductor launch deploy/minihubo-right-leg.toml\n  conductor launch robot.toml --check\n  conductor launch robot.toml --only leg --no-rt"
+    )]
+    Launch(LaunchArgs),
+    /// Runs one executor (what `launch` spawns per subsystem; see `conductor-executor --help`).
+    #[command(name = "__executor", hide = true, disable_help_flag = true)]
+    Executor {
+        /// The executor's own arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
     /// List every state: units, rate, writable, limits, device, writer process, age.
     #[command(after_help = "Example:\n  conductor list 'leg/*'")]
     List(ListArgs),
@@ -264,4 +281,26 @@ pub struct PlotArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 700)]
     pub height: u32,
+}
+
+/// `conductor launch`.
+#[derive(Debug, Args)]
+pub struct LaunchArgs {
+    /// The manifest (TOML).
+    pub manifest: PathBuf,
+    /// Launch only these subsystems (repeatable).
+    #[arg(long = "only", value_name = "SUBSYSTEM")]
+    pub only: Vec<String>,
+    /// Run without real-time set-up (normal scheduling, no pinning, no memory lock).
+    #[arg(long)]
+    pub no_rt: bool,
+    /// No live summary line per subsystem.
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Seconds between summaries [default: 1 on a terminal, 10 otherwise].
+    #[arg(long, value_name = "SECONDS")]
+    pub summary_secs: Option<f64>,
+    /// Only validate the manifest and exit (status 2 if invalid).
+    #[arg(long)]
+    pub check: bool,
 }

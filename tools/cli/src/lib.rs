@@ -15,6 +15,7 @@ pub mod cli;
 pub mod echo;
 pub mod error;
 pub mod get_set;
+pub mod launch;
 pub mod list;
 pub mod out;
 pub mod plot;
@@ -56,6 +57,9 @@ pub fn run(cli: Cli) -> Result<()> {
         Ok(Bus::open(&d, &format!("conductor-cli/{what}"))?)
     };
     match &cli.command {
+        Command::Launch(_) | Command::Executor { .. } => Err(CliError::Usage(
+            "launch runs from the conductor binary's main (it owns the process's signals)".into(),
+        )),
         Command::List(a) => list::run(&bus("list")?, a).map(drop),
         Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
         Command::Set(a) => get_set::set(&bus("set")?, a),

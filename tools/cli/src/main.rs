@@ -3,10 +3,17 @@
 use std::process::ExitCode;
 
 use clap::Parser;
-use conductor_cli::cli::Cli;
+use conductor_cli::cli::{Cli, Command};
 
 fn main() -> ExitCode {
-    match conductor_cli::run(Cli::parse()) {
+    let cli = Cli::parse();
+    // These two take over signal handling and must run before any other thread starts.
+    match &cli.command {
+        Command::Launch(a) => return conductor_cli::launch::run(cli.domain.as_deref(), a),
+        Command::Executor { args } => return conductor_cli::launch::executor(args),
+        _ => {}
+    }
+    match conductor_cli::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("conductor: {e}");

@@ -1,0 +1,70 @@
+//! `conductor launch`: the launcher from `conductor-executor`, with this same binary as the
+//! executor program (a hidden `__executor` sub-command), so `conductor` alone runs a robot.
+
+use std::ffi::OsString;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use conductor_executor::launcher::{launch, LaunchError, LaunchOptions};
+use conductor_executor::manifest::Manifest;
+
+use crate::cli::LaunchArgs;
+
+/// Exit status for an invalid manifest (the executor uses the same).
+const EXIT_MANIFEST: u8 = 2;
+
+/// Validates and launches; returns when every executor has stopped. Call it from `main` before
+/// any other thread exists: the launcher takes SIGINT/SIGTERM over with a `sigwait` thread.
+pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
+    if a.check {
+        return match Manifest::load(&a.manifest) {
+            Ok(m) => {
+                println!(
+                    "{}: valid ({} subsystems)",
+                    a.manifest.display(),
+                    m.subsystems.len()
+                );
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("{e}");
+                ExitCode::from(EXIT_MANIFEST)
+            }
+        };
+    }
+    let exe = match std::env::current_exe() {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("conductor: cannot find my own program to run executors: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let opts = LaunchOptions {
+        executor: exe,
+        executor_args: vec!["__executor".into()],
+        domain: domain.map(str::to_string),
+        only: a.only.clone(),
+        no_rt: a.no_rt,
+        quiet: a.quiet,
+        summary_interval: a.summary_secs.map(Duration::from_secs_f64),
+        handle_signals: true,
+        ..LaunchOptions::default()
+    };
+    match launch(&a.manifest, opts) {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e @ LaunchError::Manifest(_)) => {
+            eprintln!("{e}");
+            ExitCode::from(EXIT_MANIFEST)
+        }
+        Err(e) => {
+            eprintln!("conductor: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Runs one executor with its own arguments (what `launch` spawns).
+pub fn executor(args: &[OsString]) -> ExitCode {
+    let argv = std::iter::once(OsString::from("conductor __executor")).chain(args.iter().cloned());
+    conductor_executor::process::main_with_args(argv)
+}
