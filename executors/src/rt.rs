@@ -44,6 +44,8 @@ pub struct RtStatus {
     pub cpu: Option<usize>,
     /// Memory is locked.
     pub memory_locked: bool,
+    /// The CPUs are asked to stay out of deep idle states (`/dev/cpu_dma_latency` held at 0).
+    pub wakeup_latency_held: bool,
     /// Steps that failed.
     pub problems: Vec<RtProblem>,
 }
@@ -64,8 +66,42 @@ impl RtStatus {
         } else {
             "memory not locked"
         };
-        format!("{sched} on {cpu}, {mem}")
+        let idle = if self.wakeup_latency_held {
+            ", deep idle states off"
+        } else {
+            ""
+        };
+        format!("{sched} on {cpu}, {mem}{idle}")
     }
+}
+
+/// The open `/dev/cpu_dma_latency`: the kernel honours the request only while it stays open,
+/// so it lives as long as the process.
+static WAKEUP_LATENCY: std::sync::OnceLock<std::fs::File> = std::sync::OnceLock::new();
+
+/// Asks the kernel's PM QoS to keep every CPU out of idle states whose exit latency exceeds
+/// `max_us` (0: no deep C-states), as cyclictest does: leaving a deep C-state can add tens to
+/// hundreds of µs to a wake-up. Held until the process exits.
+pub fn hold_wakeup_latency(max_us: i32) -> Result<(), RtProblem> {
+    use std::io::Write;
+    if WAKEUP_LATENCY.get().is_some() {
+        return Ok(());
+    }
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .open("/dev/cpu_dma_latency")
+        .map_err(|e| RtProblem {
+            what: format!("cannot open /dev/cpu_dma_latency ({e})"),
+            fix: "run as root or grant write access to /dev/cpu_dma_latency (udev rule), or \
+                  disable deep C-states on the kernel command line (processor.max_cstate=1)"
+                .into(),
+        })?;
+    f.write_all(&max_us.to_ne_bytes()).map_err(|e| RtProblem {
+        what: format!("writing /dev/cpu_dma_latency failed ({e})"),
+        fix: "check the kernel's PM QoS support".into(),
+    })?;
+    let _ = WAKEUP_LATENCY.set(f);
+    Ok(())
 }
 
 /// Pins the calling thread to `cpu`.
@@ -186,6 +222,8 @@ pub fn setup(req: RtRequest) -> RtStatus {
             }
             Err(p) => st.problems.push(p),
         }
+        // Only worth holding for a real-time executor; not being allowed to is not fatal.
+        st.wakeup_latency_held = hold_wakeup_latency(0).is_ok();
     }
     st
 }
@@ -210,15 +248,31 @@ mod tests {
     }
 
     #[test]
+    fn wakeup_latency_is_held_or_refused_with_the_fix() {
+        match hold_wakeup_latency(0) {
+            Ok(()) => {
+                // While our fd is open the kernel's effective request is ours: 0 µs.
+                let v = std::fs::read("/dev/cpu_dma_latency").unwrap();
+                assert_eq!(i32::from_ne_bytes(v[..4].try_into().unwrap()), 0);
+            }
+            Err(e) => assert!(e.what.contains("/dev/cpu_dma_latency"), "{e}"),
+        }
+    }
+
+    #[test]
     fn summary_reads_well() {
         let s = RtStatus {
             fifo: true,
             priority: 80,
             cpu: Some(1),
             memory_locked: true,
+            wakeup_latency_held: true,
             problems: vec![],
         };
-        assert_eq!(s.summary(), "SCHED_FIFO 80 on CPU 1, memory locked");
+        assert_eq!(
+            s.summary(),
+            "SCHED_FIFO 80 on CPU 1, memory locked, deep idle states off"
+        );
         assert_eq!(
             RtStatus::default().summary(),
             "normal scheduling on any CPU, memory not locked"
