@@ -113,6 +113,14 @@ pub enum BusError {
         /// Number of values.
         values: usize,
     },
+    /// More of something than a fixed capacity allows.
+    #[error("too many {what}: at most {max}")]
+    Capacity {
+        /// What there were too many of.
+        what: &'static str,
+        /// The limit.
+        max: usize,
+    },
     /// A failure inside iceoryx2, with what we were doing.
     #[error("{context}: {detail}")]
     Iceoryx {

@@ -59,6 +59,42 @@ impl TickWaiter {
         Ok(ticks)
     }
 
+    /// Sleeps until at least one of `waiters` ticks or `timeout` passes (one `poll(2)` over their
+    /// event sockets: the way a controller of several subsystems waits). Returns, per waiter, the
+    /// ticks it consumed (all zero on timeout). Allocation-free for up to 16 waiters.
+    pub fn wait_any(waiters: &mut [TickWaiter], timeout: Duration) -> Result<[u64; 16]> {
+        let mut fds = [libc::pollfd {
+            fd: -1,
+            events: 0,
+            revents: 0,
+        }; 16];
+        if waiters.len() > fds.len() {
+            return Err(BusError::Capacity {
+                what: "tick waiters in one wait_any",
+                max: fds.len(),
+            });
+        }
+        for (p, w) in fds.iter_mut().zip(waiters.iter()) {
+            p.fd = w.raw_fd();
+            p.events = libc::POLLIN;
+        }
+        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+        // SAFETY: `fds` is a valid array and the count passed does not exceed its length; the
+        // descriptors belong to listeners that outlive the call.
+        let r = unsafe { libc::poll(fds.as_mut_ptr(), waiters.len() as libc::nfds_t, ms) };
+        if r < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(BusError::iox("waiting for ticks", e));
+            }
+        }
+        let mut ticks = [0u64; 16];
+        for (t, w) in ticks.iter_mut().zip(waiters.iter_mut()) {
+            *t = w.try_consume()?;
+        }
+        Ok(ticks)
+    }
+
     /// The underlying listener, to attach to an iceoryx2 `WaitSet`.
     pub fn listener(&self) -> &TickListener {
         &self.listener

@@ -84,6 +84,29 @@ fn tick_waiter_wakes_on_ticks_and_times_out_without() {
 }
 
 #[test]
+fn wait_any_wakes_for_whichever_subsystem_ticks() {
+    let d = Domain::unique("anytick").unwrap();
+    let bus = Bus::open(&d, "t").unwrap();
+    let spec = || [StateSpec::new("x", StateMeta::default())];
+    let mut left = StatePublisher::create(&bus, "left", &spec()).unwrap();
+    let mut right = StatePublisher::create(&bus, "right", &spec()).unwrap();
+    let mut ws = [
+        TickWaiter::new(&bus, "left").unwrap(),
+        TickWaiter::new(&bus, "right").unwrap(),
+    ];
+    let t0 = Instant::now();
+    let none = TickWaiter::wait_any(&mut ws, Duration::from_millis(40)).unwrap();
+    assert_eq!(none[..2], [0, 0]);
+    assert!(t0.elapsed() >= Duration::from_millis(35));
+    right.notify_tick().unwrap();
+    let got = TickWaiter::wait_any(&mut ws, Duration::from_secs(5)).unwrap();
+    assert_eq!((got[0], got[1] >= 1), (0, true));
+    left.notify_tick().unwrap();
+    let got = TickWaiter::wait_any(&mut ws, Duration::from_secs(5)).unwrap();
+    assert_eq!((got[0] >= 1, got[1]), (true, 0));
+}
+
+#[test]
 fn gather_and_scatter_move_vectors() {
     let d = Domain::unique("vec").unwrap();
     let bus = Bus::open(&d, "t").unwrap();
