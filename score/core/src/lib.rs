@@ -41,6 +41,7 @@ mod lexer;
 pub mod line;
 pub mod num;
 mod report;
+mod run;
 mod symbol;
 pub mod text;
 mod vars;

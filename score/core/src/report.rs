@@ -88,7 +88,7 @@ impl<N: Real> Engine<N> {
         let (start, len) = match sym.kind {
             Kind::Expr { start, len } => (start as usize, len as usize),
             Kind::Const => {
-                let _ = writeln!(out, "{:.6}", sym.value);
+                let _ = writeln!(out, "{:.6}", self.values[id.0 as usize]);
                 return;
             }
             _ => return,
@@ -154,7 +154,7 @@ impl<N: Real> Engine<N> {
         let rate = Hz(sym.task.map_or(0, |t| t.mhz));
         match sym.kind {
             Kind::Placeholder | Kind::AdcVolts { .. } => return Ok(false),
-            Kind::Const => write!(out, "defexp {name} {}", Compact(sym.value))?,
+            Kind::Const => write!(out, "defexp {name} {}", Compact(self.values[id.0 as usize]))?,
             Kind::Expr { start, len } => {
                 write!(out, "defexp {name}")?;
                 for op in &self.ops[start as usize..(start + len) as usize] {
@@ -212,9 +212,12 @@ impl<N: Real> Engine<N> {
                 }
             }
             Kind::AdcRaw { input, .. } => write!(out, "adc {} {rate}", Chan(input))?,
-            Kind::PwmFixed { out: o, freq } => {
-                write!(out, "pwm {} {freq} {}", Out(o), Compact(sym.value))?
-            }
+            Kind::PwmFixed { out: o, freq } => write!(
+                out,
+                "pwm {} {freq} {}",
+                Out(o),
+                Compact(self.values[id.0 as usize])
+            )?,
             Kind::PwmFollow { src, out: o, freq } => write!(
                 out,
                 "defpwm {name} {} {rate} {} {freq}",

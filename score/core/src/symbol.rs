@@ -13,11 +13,34 @@ pub(crate) enum Operand<N> {
     Var(VarId),
 }
 
+/// The length in seconds of a block's latest time step, kept with the step in microseconds:
+/// at a steady rate the step repeats, and converting it again (a 64-bit conversion and a
+/// division, hundreds of cycles in soft float) would give the same bits.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct Step<N> {
+    us: u64,
+    s: N,
+}
+
+impl<N: Real> Step<N> {
+    /// `N::seconds_from_us(us)`, converted only when `us` differs from the previous step.
+    /// (The default, 0 µs = 0 s, is the conversion of 0.)
+    #[inline]
+    pub fn seconds(&mut self, us: u64) -> N {
+        if us != self.us {
+            self.us = us;
+            self.s = N::seconds_from_us(us);
+        }
+        self.s
+    }
+}
+
 /// Trapezoid integrator state: `I += (t2 - t1) (x1 + x2) / 2`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct Trapezoid<N> {
     pub last: Option<(u64, N)>,
     pub acc: N,
+    dt: Step<N>,
 }
 
 impl<N: Real> Trapezoid<N> {
@@ -25,7 +48,7 @@ impl<N: Real> Trapezoid<N> {
     #[inline]
     pub fn step(&mut self, t_us: u64, x: N) -> N {
         if let Some((t0, x0)) = self.last {
-            let dt = N::seconds_from_us(t_us.saturating_sub(t0));
+            let dt = self.dt.seconds(t_us.saturating_sub(t0));
             self.acc = self.acc + (x0 + x) * dt * N::HALF;
         }
         self.last = Some((t_us, x));
@@ -38,6 +61,7 @@ impl<N: Real> Trapezoid<N> {
 pub(crate) struct TwoPoint<N> {
     pub last: Option<(u64, N)>,
     pub out: N,
+    dt: Step<N>,
 }
 
 impl<N: Real> TwoPoint<N> {
@@ -45,11 +69,56 @@ impl<N: Real> TwoPoint<N> {
     pub fn step(&mut self, t_us: u64, x: N) -> N {
         if let Some((t0, x0)) = self.last {
             if t_us > t0 {
-                self.out = (x - x0) / N::seconds_from_us(t_us - t0);
+                self.out = (x - x0) / self.dt.seconds(t_us - t0);
             }
         }
         self.last = Some((t_us, x));
         self.out
+    }
+}
+
+/// First-order low-pass state: `y += dt/(tau+dt) (x - y)`, `tau = 1/(2 pi fc)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct LowPass<N> {
+    /// `1 / (2 pi fc)`, computed once at definition.
+    tau: N,
+    /// Instant of the previous sample (`None` before the first).
+    last_t: Option<u64>,
+    /// `dt/(tau+dt)` of the latest step (`dt_us` in microseconds; 0 before the first step),
+    /// kept like [`Step`].
+    dt_us: u64,
+    gain: N,
+}
+
+impl<N: Real> LowPass<N> {
+    pub fn new(cutoff_hz: N) -> Self {
+        LowPass {
+            tau: N::ONE / (N::from_f64(core::f64::consts::TAU) * cutoff_hz),
+            last_t: None,
+            dt_us: 0,
+            gain: N::ZERO,
+        }
+    }
+
+    /// The output after sample `x` at `t_us`, from the previous output `y`: the first sample
+    /// passes through; a repeated instant leaves `y`.
+    #[inline]
+    pub fn step(&mut self, t_us: u64, x: N, y: N) -> N {
+        let out = match self.last_t {
+            Some(t0) if t_us > t0 => {
+                let us = t_us - t0;
+                if us != self.dt_us {
+                    let dt = N::seconds_from_us(us);
+                    self.dt_us = us;
+                    self.gain = dt / (self.tau + dt);
+                }
+                y + self.gain * (x - y)
+            }
+            Some(_) => y,
+            None => x,
+        };
+        self.last_t = Some(t_us);
+        out
     }
 }
 
@@ -82,7 +151,7 @@ pub(crate) enum Kind<N> {
     Lpf {
         src: VarId,
         cutoff_hz: N,
-        last_t: Option<u64>,
+        st: LowPass<N>,
     },
     /// `defpid`: `kp e + ki I(e) + kd D(e)`, optionally clamped with conditional integration.
     Pid {
@@ -296,7 +365,6 @@ impl Task {
 pub(crate) struct Symbol<N> {
     pub name: Name,
     pub kind: Kind<N>,
-    pub value: N,
     pub task: Option<Task>,
 }
 

@@ -9,7 +9,7 @@ use crate::expr::{self, Class, Op};
 use crate::hal::Hal;
 use crate::lexer::parse_number;
 use crate::num::Real;
-use crate::symbol::{Family, Kind, Operand, Symbol, Task, Trapezoid, TwoPoint};
+use crate::symbol::{Family, Kind, LowPass, Operand, Symbol, Task, Trapezoid, TwoPoint};
 use crate::VarId;
 
 use super::args::Args;
@@ -131,9 +131,9 @@ impl<N: Real> Engine<N> {
         self.syms[id.0 as usize] = Some(Symbol {
             name: mk_name(name),
             kind,
-            value,
             task: task.map(Task::new),
         });
+        self.values[id.0 as usize] = value;
         self.collect_placeholders();
         self.rebuild();
         id
@@ -314,7 +314,7 @@ impl<N: Real> Engine<N> {
                 self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| Kind::Lpf {
                     src: e.resolve(src),
                     cutoff_hz: fc,
-                    last_t: None,
+                    st: LowPass::new(fc),
                 });
             }
             _ => {
@@ -383,7 +383,6 @@ pub(super) fn placeholder<N: Real>(name: &str) -> Symbol<N> {
     Symbol {
         name: mk_name(name),
         kind: Kind::Placeholder,
-        value: N::ZERO,
         task: None,
     }
 }
