@@ -1,9 +1,9 @@
 //! The engine: symbol table, dependency graph, lazy evaluation and the rate-monotonic scheduler.
 
 use crate::capacity::{MAX_EXPR_OPS, MAX_PATH_LEN, MAX_STREAMS, MAX_SYMBOLS};
-use crate::expr::{Op, Stack};
 use crate::hal::StreamId;
 use crate::num::{Num, Real};
+use crate::program::{Instr, Stack};
 use crate::symbol::{Kind, SymSet, Symbol};
 use crate::text::ShortStr;
 use crate::VarId;
@@ -41,7 +41,9 @@ pub struct Engine<N: Real = Num> {
     /// The value of each slot (0 for an empty one), apart from the symbols so that reading an
     /// input is one load and an update can change its own symbol while reading the others.
     pub(crate) values: [N; MAX_SYMBOLS],
-    pub(crate) ops: [Op<N>; MAX_EXPR_OPS],
+    /// The compiled `defexp` expressions, one after the other (see [`crate::program`]).
+    pub(crate) ops: [Instr<N>; MAX_EXPR_OPS],
+    /// Instructions in use (at most the tokens they stand for, see `tokens_used`).
     pub(crate) ops_used: usize,
     pub(crate) streams: [Option<Stream>; MAX_STREAMS],
     /// What a reader of slot i must have fresh: i itself, plus for a lazy i its inputs' views.
@@ -50,6 +52,9 @@ pub struct Engine<N: Real = Num> {
     pub(crate) needs: [SymSet; MAX_SYMBOLS],
     /// Lazy slots in dependency order (inputs first).
     pub(crate) eval_order: [u8; MAX_SYMBOLS],
+    /// For each position of `eval_order`, where its code is in `ops` if it is an expression
+    /// (length 0 for a scale or saturation).
+    pub(crate) eval_code: [(u16, u16); MAX_SYMBOLS],
     pub(crate) eval_len: usize,
     /// Periodic slots in priority order: rate descending, then producers before consumers.
     pub(crate) run_order: [u8; MAX_SYMBOLS],
@@ -81,12 +86,13 @@ impl<N: Real> Engine<N> {
         Engine {
             syms: [None; MAX_SYMBOLS],
             values: [N::ZERO; MAX_SYMBOLS],
-            ops: [Op::Bin(crate::expr::BinOp::Add); MAX_EXPR_OPS],
+            ops: [Instr::BinPop(crate::expr::BinOp::Add); MAX_EXPR_OPS],
             ops_used: 0,
             streams: [None; MAX_STREAMS],
             view: [SymSet::EMPTY; MAX_SYMBOLS],
             needs: [SymSet::EMPTY; MAX_SYMBOLS],
             eval_order: [0; MAX_SYMBOLS],
+            eval_code: [(0, 0); MAX_SYMBOLS],
             eval_len: 0,
             run_order: [0; MAX_SYMBOLS],
             run_len: 0,
@@ -124,6 +130,11 @@ impl<N: Real> Engine<N> {
     /// True if the table is empty.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Tokens of all expressions together (the capacity [`MAX_EXPR_OPS`] counts tokens).
+    pub(crate) fn tokens_used(&self) -> usize {
+        crate::program::tokens_in(&self.ops[..self.ops_used])
     }
 
     /// The slot of a variable by name.
@@ -203,6 +214,7 @@ impl<N: Real> Engine<N> {
         // slot gets placed; a slot that could not be would simply never be re-evaluated.
         let mut placed = SymSet::default();
         self.eval_len = 0;
+        self.eval_code = [(0, 0); MAX_SYMBOLS];
         loop {
             let mut progress = false;
             for i in 0..MAX_SYMBOLS {
@@ -218,6 +230,10 @@ impl<N: Real> Engine<N> {
                 });
                 if ready {
                     placed.insert(i);
+                    self.eval_code[self.eval_len] = match self.syms[i].as_ref().map(|s| s.kind) {
+                        Some(Kind::Expr { start, len }) => (start, len),
+                        _ => (0, 0),
+                    };
                     self.eval_order[self.eval_len] = i as u8;
                     self.eval_len += 1;
                     let mut needs = SymSet::default();

@@ -40,6 +40,7 @@ pub mod help;
 mod lexer;
 pub mod line;
 pub mod num;
+mod program;
 mod report;
 mod run;
 mod symbol;

@@ -8,6 +8,7 @@ use crate::engine::Engine;
 use crate::expr::{op_word, un_word, Op};
 use crate::hal::{AdcInput, PwmOutput};
 use crate::num::{Compact, Real};
+use crate::program::tokens;
 use crate::symbol::{Kind, Operand};
 use crate::VarId;
 
@@ -93,7 +94,13 @@ impl<N: Real> Engine<N> {
             }
             _ => return,
         };
-        let ops = &self.ops[start..start + len];
+        let mut ops = [Op::Lit(N::ZERO); MAX_EXPR_TOKENS];
+        let mut n = 0;
+        for (slot, op) in ops.iter_mut().zip(tokens(&self.ops[start..start + len])) {
+            *slot = op;
+            n += 1;
+        }
+        let ops = &ops[..n];
         let mut kids = [[usize::MAX; 2]; MAX_EXPR_TOKENS];
         let mut stack = [0usize; MAX_EXPR_TOKENS];
         let mut sp = 0;
@@ -157,8 +164,8 @@ impl<N: Real> Engine<N> {
             Kind::Const => write!(out, "defexp {name} {}", Compact(self.values[id.0 as usize]))?,
             Kind::Expr { start, len } => {
                 write!(out, "defexp {name}")?;
-                for op in &self.ops[start as usize..(start + len) as usize] {
-                    match *op {
+                for op in tokens(&self.ops[start as usize..(start + len) as usize]) {
+                    match op {
                         Op::Lit(v) => write!(out, " {}", Compact(v))?,
                         Op::Var(v) => write!(out, " {}", self.name_of(v))?,
                         Op::Bin(b) => write!(out, " {}", op_word(b))?,

@@ -10,9 +10,9 @@ use core::fmt::Write as _;
 
 use crate::capacity::MAX_SYMBOLS;
 use crate::engine::{clamp, Engine, Stream};
-use crate::expr::{self, Op, Stack};
 use crate::hal::{AdcInput, Hal, StreamId};
 use crate::num::Real;
+use crate::program;
 use crate::symbol::{Kind, Operand, SymSet};
 use crate::text::BufWriter;
 use crate::VarId;
@@ -31,23 +31,10 @@ fn operand<N: Real>(values: &[N; MAX_SYMBOLS], o: Operand<N>) -> N {
     }
 }
 
-/// The new value of a lazy variable from its inputs' stored values (`old` for other kinds).
-#[inline]
-fn compute_lazy<N: Real>(
-    kind: &Kind<N>,
-    ops: &[Op<N>],
-    values: &[N; MAX_SYMBOLS],
-    stack: &mut Stack<N>,
-    old: N,
-) -> N {
+/// The new value of a lazy variable other than an expression from its inputs' stored values
+/// (`old` for other kinds).
+fn compute_lazy<N: Real>(kind: &Kind<N>, values: &[N; MAX_SYMBOLS], old: N) -> N {
     match *kind {
-        Kind::Expr { start, len } => {
-            let (s, l) = (start as usize, len as usize);
-            match ops.get(s..s + l) {
-                Some(code) => expr::eval(code, values, stack),
-                None => N::NAN,
-            }
-        }
         Kind::Scale { src, a, b, c, d } => {
             let y = c + (at(values, src) - a) * (d - c) / (b - a);
             let (lo, hi) = if c <= d { (c, d) } else { (d, c) };
@@ -67,27 +54,41 @@ fn stream_id(streams: &[Option<Stream>], slot: u8) -> Option<StreamId> {
 
 impl<N: Real> Engine<N> {
     /// Recomputes, in dependency order, the lazy members of `set` found at positions
-    /// `span` of the evaluation order (precomputed per reader by `rebuild`).
+    /// `span` of the evaluation order (precomputed per reader by `rebuild`; most updates read
+    /// no bare expression and have an empty span).
     #[inline]
     fn refresh(&mut self, set: SymSet, span: (u8, u8)) {
+        if span.0 < span.1 {
+            self.refresh_span(set, span.0 as usize, span.1 as usize);
+        }
+    }
+
+    fn refresh_span(&mut self, set: SymSet, from: usize, to: usize) {
         let Engine {
             syms,
             ops,
             values,
             stack,
             eval_order,
+            eval_code,
             ..
         } = self;
-        let order = eval_order
-            .get(span.0 as usize..span.1 as usize)
-            .unwrap_or(&[]);
-        for &j in order {
-            let j = j as usize;
-            if set.contains(j) {
-                if let Some(s) = &syms[j] {
-                    values[j] = compute_lazy(&s.kind, ops, values, stack, values[j]);
-                }
+        for k in from..to.min(MAX_SYMBOLS) {
+            let j = eval_order[k] as usize;
+            if !set.contains(j) {
+                continue;
             }
+            let (start, len) = (eval_code[k].0 as usize, eval_code[k].1 as usize);
+            values[j] = if len > 0 {
+                match ops.get(start..start + len) {
+                    Some(code) => program::eval(code, values, stack),
+                    None => N::NAN,
+                }
+            } else if let Some(s) = &syms[j] {
+                compute_lazy(&s.kind, values, values[j])
+            } else {
+                values[j]
+            };
         }
     }
 

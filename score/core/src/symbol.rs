@@ -129,7 +129,7 @@ pub(crate) enum Kind<N> {
     Placeholder,
     /// `defexp name <number>`: a settable constant.
     Const,
-    /// `defexp`: postfix ops `ops[start..start+len]`, evaluated lazily.
+    /// `defexp`: compiled instructions `ops[start..start+len]`, evaluated lazily.
     Expr { start: u16, len: u16 },
     /// `defscale`: `[a,b] -> [c,d]`, hard-limited to `[c,d]`, lazy.
     Scale { src: VarId, a: N, b: N, c: N, d: N },
@@ -244,7 +244,10 @@ impl<N> Kind<N> {
     }
 
     /// Calls `f` for every variable this one reads (expression variables via `ops`).
-    pub fn for_each_ref(&self, ops: &[crate::expr::Op<N>], mut f: impl FnMut(VarId)) {
+    pub fn for_each_ref(&self, ops: &[crate::program::Instr<N>], mut f: impl FnMut(VarId))
+    where
+        N: Copy,
+    {
         let operand = |o: &Operand<N>, f: &mut dyn FnMut(VarId)| {
             if let Operand::Var(v) = o {
                 f(*v)
@@ -253,10 +256,13 @@ impl<N> Kind<N> {
         match self {
             Kind::Expr { start, len } => {
                 let (s, l) = (*start as usize, *len as usize);
-                for op in ops.get(s..s + l).unwrap_or(&[]) {
-                    if let crate::expr::Op::Var(v) = op {
-                        f(*v)
-                    }
+                for v in ops
+                    .get(s..s + l)
+                    .unwrap_or(&[])
+                    .iter()
+                    .filter_map(|i| i.var())
+                {
+                    f(v)
                 }
             }
             Kind::Scale { src, .. }

@@ -278,6 +278,39 @@ fn help_lists_menus_and_capacities() {
 }
 
 #[test]
+fn the_expression_capacity_counts_tokens_as_typed() {
+    let (mut e, mut b) = engine();
+    let cap = score_core::capacity::MAX_EXPR_OPS;
+    let per = score_core::capacity::MAX_EXPR_TOKENS;
+    // k 1 + 1 + ... abs: 32 tokens (stored compiled in fewer instructions; the limit is the
+    // tokens).
+    let long = format!("k{} abs", " 1 +".repeat((per - 2) / 2));
+    assert_eq!(long.split(' ').count(), per);
+    for i in 0..cap / per {
+        run(&mut e, &mut b, &format!("defexp e{i} {long}"));
+    }
+    let out = run(&mut e, &mut b, "capacities");
+    assert!(
+        out.contains(&format!("{cap} of {cap} expression tokens")),
+        "{out}"
+    );
+    let before = e.clone();
+    let err = e
+        .execute("defexp z k abs", &mut b, &mut String::new())
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        format!("defexp: no room: expression tokens (capacity {cap}; see 'capacities')")
+    );
+    assert_eq!(e, before);
+    // Redefining counts the new tokens instead of the old ones.
+    run(&mut e, &mut b, &format!("defexp e0 {long}"));
+    run(&mut e, &mut b, "defexp e0 k 1 +\ndefexp z k abs");
+    assert_eq!(e.value_of("z"), Some(0.0));
+    assert_eq!(e.value_of("e1"), Some(15.0));
+}
+
+#[test]
 fn last_update_reports_the_scheduled_instant_of_the_latest_update() {
     let (mut e, mut b) = engine();
     e.set_time(1_000);
