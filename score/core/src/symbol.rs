@@ -49,7 +49,7 @@ impl<N: Real> Trapezoid<N> {
     pub fn step(&mut self, t_us: u64, x: N) -> N {
         if let Some((t0, x0)) = self.last {
             let dt = self.dt.seconds(t_us.saturating_sub(t0));
-            self.acc = self.acc + (x0 + x) * dt * N::HALF;
+            self.acc = self.acc + ((x0 + x) * dt).halve();
         }
         self.last = Some((t_us, x));
         self.acc
