@@ -56,13 +56,16 @@ impl<N: Real> Engine<N> {
     /// Recomputes, in dependency order, the lazy members of `set` found at positions
     /// `span` of the evaluation order (precomputed per reader by `rebuild`; most updates read
     /// no bare expression and have an empty span).
-    #[inline]
+    // The check inline at every caller, the loop out of line: an empty span then costs a
+    // compare instead of a call.
+    #[inline(always)]
     fn refresh(&mut self, set: SymSet, span: (u8, u8)) {
         if span.0 < span.1 {
             self.refresh_span(set, span.0 as usize, span.1 as usize);
         }
     }
 
+    #[inline(never)]
     fn refresh_span(&mut self, set: SymSet, from: usize, to: usize) {
         let Engine {
             syms,

@@ -122,8 +122,12 @@ impl<N: Real> LowPass<N> {
     }
 }
 
-/// What a variable is. `Copy` so an update can take it out, compute, and put it back.
+/// What a variable is. `Copy` so a command can take it out, change it, and put it back.
+/// `repr(u8)`: an explicit one-byte tag (same size here) instead of a discriminant hidden in
+/// a 64-bit field's spare values, which made every `match` on a Cortex-M0+ a chain of 64-bit
+/// compares.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(u8)]
 pub(crate) enum Kind<N> {
     /// Referenced before being defined; reads as 0.
     Placeholder,
