@@ -342,11 +342,13 @@ impl Task {
     /// Sets `due` one period after `from`.
     #[inline]
     pub fn advance_one(&mut self, from: u64) {
-        // frac < mhz and r < mhz, so the sum fits in u64 and carries at most one microsecond.
-        let f = self.frac as u64 + self.r as u64;
-        let carry = (f >= self.mhz as u64) as u64;
-        self.frac = (f - carry * self.mhz as u64) as u32;
-        self.due = Some(from.saturating_add(self.q as u64 + carry));
+        // frac < mhz and r < mhz, so the sum carries at most one microsecond. In 32 bits (a
+        // sum past u32::MAX is a carry too): 64-bit arithmetic costs several instructions per
+        // operation on a Cortex-M0+.
+        let (f, wrapped) = self.frac.overflowing_add(self.r);
+        let carry = wrapped || f >= self.mhz;
+        self.frac = if carry { f.wrapping_sub(self.mhz) } else { f };
+        self.due = Some(from.saturating_add(self.q as u64 + carry as u64));
     }
 
     /// Sets `due` `n` periods after `from` (the late path: 128-bit arithmetic).
@@ -394,6 +396,27 @@ impl SymSet {
     pub fn union(&mut self, other: &SymSet) {
         for (a, b) in self.0.iter_mut().zip(other.0.iter()) {
             *a |= *b;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The on-time step (32-bit) agrees with the general one (128-bit) for every rate, up to
+    /// rates whose fractional sums pass u32::MAX.
+    #[test]
+    fn advance_one_is_advance_by_one_period() {
+        for mhz in [1, 3, 7_000, 999_999, 100_000_000, (1 << 31) + 5, u32::MAX] {
+            let (mut a, mut b) = (Task::new(mhz), Task::new(mhz));
+            let mut t = 0u64;
+            for _ in 0..2_000 {
+                a.advance_one(t);
+                b.advance(t, 1);
+                assert_eq!(a, b, "{mhz} mHz at {t} us");
+                t = a.due.unwrap_or(0);
+            }
         }
     }
 }
