@@ -13,7 +13,7 @@ use crate::engine::{clamp, Engine, Stream};
 use crate::hal::{AdcInput, Hal, StreamId};
 use crate::num::Real;
 use crate::program;
-use crate::symbol::{Kind, Operand, SymSet};
+use crate::symbol::{Kind, Operand};
 use crate::text::BufWriter;
 use crate::VarId;
 
@@ -53,20 +53,26 @@ fn stream_id(streams: &[Option<Stream>], slot: u8) -> Option<StreamId> {
 }
 
 impl<N: Real> Engine<N> {
-    /// Recomputes, in dependency order, the lazy members of `set` found at positions
-    /// `span` of the evaluation order (precomputed per reader by `rebuild`; most updates read
-    /// no bare expression and have an empty span).
+    /// Recomputes, in dependency order, the bare expressions that reading slot `i` (a lazy
+    /// slot: its inputs and itself, `view`) or updating it (a periodic slot: its lazy inputs,
+    /// `needs`) must have fresh: the positions `span[i]` of the evaluation order precomputed by
+    /// `rebuild`. Most updates read no bare expression and have an empty span.
     // The check inline at every caller, the loop out of line: an empty span then costs a
     // compare instead of a call.
     #[inline(always)]
-    fn refresh(&mut self, set: SymSet, span: (u8, u8)) {
-        if span.0 < span.1 {
-            self.refresh_span(set, span.0 as usize, span.1 as usize);
+    fn refresh(&mut self, i: usize) {
+        let (from, to) = self.span[i];
+        if from < to {
+            self.refresh_span(i, from as usize, to as usize);
         }
     }
 
     #[inline(never)]
-    fn refresh_span(&mut self, set: SymSet, from: usize, to: usize) {
+    fn refresh_span(&mut self, i: usize, from: usize, to: usize) {
+        let set = match &self.syms[i] {
+            Some(s) if s.kind.is_lazy() => self.view[i],
+            _ => self.needs[i],
+        };
         let Engine {
             syms,
             ops,
@@ -100,7 +106,7 @@ impl<N: Real> Engine<N> {
         let i = id.0 as usize;
         let s = self.syms.get(i)?.as_ref()?;
         if s.kind.is_lazy() {
-            self.refresh(self.view[i], self.span[i]);
+            self.refresh(i);
         }
         Some(self.values[i])
     }
@@ -172,20 +178,20 @@ impl<N: Real> Engine<N> {
                     due_min = due_min.min(due);
                     continue;
                 }
-                Some(due) => {
-                    let behind = task.periods_behind(due, now);
-                    if behind > 0 {
+                Some(due) => match task.periods_behind(due, now) {
+                    0 => due,
+                    behind => {
                         task.missed = task
                             .missed
                             .saturating_add(behind.min(u32::MAX as u64) as u32);
                         task.advance(due, behind);
+                        task.due.unwrap_or(now)
                     }
-                    task.due.unwrap_or(now)
-                }
+                },
             };
-            task.advance_one(t);
+            let next = task.advance_one(t);
             task.last = Some(t);
-            due_min = due_min.min(task.due.unwrap_or(now));
+            due_min = due_min.min(next);
             self.update(i, t, hal);
             ran += 1;
         }
@@ -196,7 +202,7 @@ impl<N: Real> Engine<N> {
 
     /// One update of periodic slot `i` at instant `t`, in place.
     fn update(&mut self, i: usize, t: u64, hal: &mut impl Hal) {
-        self.refresh(self.needs[i], self.span[i]);
+        self.refresh(i);
         let Engine {
             syms,
             values,

@@ -339,16 +339,18 @@ impl Task {
         self.frac = 0;
     }
 
-    /// Sets `due` one period after `from`.
+    /// Sets `due` one period after `from`, and returns it.
     #[inline]
-    pub fn advance_one(&mut self, from: u64) {
+    pub fn advance_one(&mut self, from: u64) -> u64 {
         // frac < mhz and r < mhz, so the sum carries at most one microsecond. In 32 bits (a
         // sum past u32::MAX is a carry too): 64-bit arithmetic costs several instructions per
         // operation on a Cortex-M0+.
         let (f, wrapped) = self.frac.overflowing_add(self.r);
         let carry = wrapped || f >= self.mhz;
         self.frac = if carry { f.wrapping_sub(self.mhz) } else { f };
-        self.due = Some(from.saturating_add(self.q as u64 + carry as u64));
+        let due = from.saturating_add(self.q as u64 + carry as u64);
+        self.due = Some(due);
+        due
     }
 
     /// Sets `due` `n` periods after `from` (the late path: 128-bit arithmetic).
