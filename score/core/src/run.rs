@@ -335,7 +335,7 @@ impl<N: Real> Engine<N> {
         let fs = N::from_u32(hal.adc_full_scale().max(1) as u32);
         let v = N::from_u32(raw as u32) * vref / fs;
         match input {
-            AdcInput::Differential(_) => v - vref / N::from_u32(2),
+            AdcInput::Differential(_) => v - vref.halve(), // = vref / 2, exactly
             _ => v,
         }
     }
