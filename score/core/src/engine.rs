@@ -1,13 +1,11 @@
 //! The engine: symbol table, dependency graph, lazy evaluation and the rate-monotonic scheduler.
 
-use core::fmt::Write as _;
-
 use crate::capacity::{MAX_EXPR_OPS, MAX_PATH_LEN, MAX_STREAMS, MAX_SYMBOLS};
-use crate::expr::{self, Op};
-use crate::hal::{AdcInput, Hal, StreamId};
+use crate::hal::StreamId;
 use crate::num::{Num, Real};
-use crate::symbol::{Kind, Operand, SymSet, Symbol};
-use crate::text::{BufWriter, ShortStr};
+use crate::program::{Instr, Stack};
+use crate::symbol::{Kind, SymSet, Symbol};
+use crate::text::ShortStr;
 use crate::VarId;
 
 /// Which command list `help` shows (the thesis' main and variables menus). Every command is
@@ -40,7 +38,12 @@ pub(crate) struct Stream {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Engine<N: Real = Num> {
     pub(crate) syms: [Option<Symbol<N>>; MAX_SYMBOLS],
-    pub(crate) ops: [Op<N>; MAX_EXPR_OPS],
+    /// The value of each slot (0 for an empty one), apart from the symbols so that reading an
+    /// input is one load and an update can change its own symbol while reading the others.
+    pub(crate) values: [N; MAX_SYMBOLS],
+    /// The compiled `defexp` expressions, one after the other (see [`crate::program`]).
+    pub(crate) ops: [Instr<N>; MAX_EXPR_OPS],
+    /// Instructions in use (at most the tokens they stand for, see `tokens_used`).
     pub(crate) ops_used: usize,
     pub(crate) streams: [Option<Stream>; MAX_STREAMS],
     /// What a reader of slot i must have fresh: i itself, plus for a lazy i its inputs' views.
@@ -49,10 +52,22 @@ pub struct Engine<N: Real = Num> {
     pub(crate) needs: [SymSet; MAX_SYMBOLS],
     /// Lazy slots in dependency order (inputs first).
     pub(crate) eval_order: [u8; MAX_SYMBOLS],
+    /// For each position of `eval_order`, where its code is in `ops` if it is an expression
+    /// (length 0 for a scale or saturation).
+    pub(crate) eval_code: [(u16, u16); MAX_SYMBOLS],
     pub(crate) eval_len: usize,
     /// Periodic slots in priority order: rate descending, then producers before consumers.
     pub(crate) run_order: [u8; MAX_SYMBOLS],
     pub(crate) run_len: usize,
+    /// The positions in `eval_order` of the first and past the last lazy slot that reading
+    /// slot i (`view[i]`, lazy i) or updating it (`needs[i]`, periodic i) must refresh.
+    pub(crate) span: [(u8, u8); MAX_SYMBOLS],
+    /// Earliest `due` of the tasks that have one (`u64::MAX` if none) ...
+    pub(crate) due_min: u64,
+    /// ... and whether some task has not run yet (it is due at the next tick).
+    pub(crate) due_now: bool,
+    /// The evaluation stack of bare expressions (working memory, not state).
+    pub(crate) stack: Stack<N>,
     pub(crate) now_us: u64,
     pub(crate) menu: Menu,
     pub(crate) generation: u32,
@@ -70,15 +85,21 @@ impl<N: Real> Engine<N> {
     pub const fn new() -> Self {
         Engine {
             syms: [None; MAX_SYMBOLS],
-            ops: [Op::Bin(crate::expr::BinOp::Add); MAX_EXPR_OPS],
+            values: [N::ZERO; MAX_SYMBOLS],
+            ops: [Instr::BinPop(crate::expr::BinOp::Add); MAX_EXPR_OPS],
             ops_used: 0,
             streams: [None; MAX_STREAMS],
             view: [SymSet::EMPTY; MAX_SYMBOLS],
             needs: [SymSet::EMPTY; MAX_SYMBOLS],
             eval_order: [0; MAX_SYMBOLS],
+            eval_code: [(0, 0); MAX_SYMBOLS],
             eval_len: 0,
             run_order: [0; MAX_SYMBOLS],
             run_len: 0,
+            span: [(0, 0); MAX_SYMBOLS],
+            due_min: u64::MAX,
+            due_now: false,
+            stack: Stack::new(),
             now_us: 0,
             menu: Menu::Main,
             generation: 0,
@@ -109,6 +130,11 @@ impl<N: Real> Engine<N> {
     /// True if the table is empty.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Tokens of all expressions together (the capacity [`MAX_EXPR_OPS`] counts tokens).
+    pub(crate) fn tokens_used(&self) -> usize {
+        crate::program::tokens_in(&self.ops[..self.ops_used])
     }
 
     /// The slot of a variable by name.
@@ -188,6 +214,7 @@ impl<N: Real> Engine<N> {
         // slot gets placed; a slot that could not be would simply never be re-evaluated.
         let mut placed = SymSet::default();
         self.eval_len = 0;
+        self.eval_code = [(0, 0); MAX_SYMBOLS];
         loop {
             let mut progress = false;
             for i in 0..MAX_SYMBOLS {
@@ -203,6 +230,10 @@ impl<N: Real> Engine<N> {
                 });
                 if ready {
                     placed.insert(i);
+                    self.eval_code[self.eval_len] = match self.syms[i].as_ref().map(|s| s.kind) {
+                        Some(Kind::Expr { start, len }) => (start, len),
+                        _ => (0, 0),
+                    };
                     self.eval_order[self.eval_len] = i as u8;
                     self.eval_len += 1;
                     let mut needs = SymSet::default();
@@ -234,6 +265,8 @@ impl<N: Real> Engine<N> {
             }
         }
         self.rebuild_run_order();
+        self.rebuild_spans();
+        self.rescan_deadlines();
         self.generation = self.generation.wrapping_add(1);
     }
 
@@ -242,6 +275,24 @@ impl<N: Real> Engine<N> {
         match self.syms[j].as_ref().map(|s| s.kind) {
             Some(Kind::AdcVolts { raw }) => raw.0 as usize,
             _ => j,
+        }
+    }
+
+    /// For each slot, where in `eval_order` the lazy slots it must refresh start and end.
+    fn rebuild_spans(&mut self) {
+        for i in 0..MAX_SYMBOLS {
+            let set = match &self.syms[i] {
+                Some(s) if s.kind.is_lazy() => self.view[i],
+                Some(s) if s.task.is_some() => self.needs[i],
+                _ => SymSet::EMPTY,
+            };
+            let order = &self.eval_order[..self.eval_len];
+            let first = order.iter().position(|&j| set.contains(j as usize));
+            let last = order.iter().rposition(|&j| set.contains(j as usize));
+            self.span[i] = match (first, last) {
+                (Some(a), Some(b)) => (a as u8, b as u8 + 1),
+                _ => (0, 0),
+            };
         }
     }
 
@@ -299,280 +350,6 @@ impl<N: Real> Engine<N> {
             }
         }
     }
-
-    /// Recomputes the lazy members of `set` in dependency order.
-    fn refresh(&mut self, set: SymSet) {
-        for k in 0..self.eval_len {
-            let j = self.eval_order[k] as usize;
-            if set.contains(j) {
-                let v = self.compute_lazy(j);
-                if let Some(s) = &mut self.syms[j] {
-                    s.value = v;
-                }
-            }
-        }
-    }
-
-    #[inline]
-    fn stored(&self, id: VarId) -> N {
-        self.syms
-            .get(id.0 as usize)
-            .and_then(|s| s.as_ref())
-            .map_or(N::ZERO, |s| s.value)
-    }
-
-    fn operand(&self, o: Operand<N>) -> N {
-        match o {
-            Operand::Lit(v) => v,
-            Operand::Var(id) => self.stored(id),
-        }
-    }
-
-    fn compute_lazy(&self, j: usize) -> N {
-        let Some(s) = &self.syms[j] else {
-            return N::ZERO;
-        };
-        match s.kind {
-            Kind::Expr { start, len } => {
-                let (s, l) = (start as usize, len as usize);
-                expr::eval(&self.ops[s..s + l], |id| self.stored(id))
-            }
-            Kind::Scale { src, a, b, c, d } => {
-                let y = c + (self.stored(src) - a) * (d - c) / (b - a);
-                let (lo, hi) = if c <= d { (c, d) } else { (d, c) };
-                clamp(y, lo, hi)
-            }
-            Kind::Sat { src, lo, hi } => clamp(self.stored(src), lo, hi),
-            _ => s.value,
-        }
-    }
-
-    /// Current value of a variable, evaluating bare expressions on demand.
-    pub fn value(&mut self, id: VarId) -> Option<N> {
-        let s = self.sym(id)?;
-        if s.kind.is_lazy() {
-            let set = self.view[id.0 as usize];
-            self.refresh(set);
-        }
-        self.sym(id).map(|s| s.value)
-    }
-
-    /// Current value of a variable by name.
-    pub fn value_of(&mut self, name: &str) -> Option<N> {
-        let id = self.lookup(name)?;
-        self.value(id)
-    }
-
-    /// Tells the engine the current time without running any update (never backwards). A
-    /// periodic variable defined afterwards first runs at this instant; ports call it before
-    /// [`Engine::execute`] so that new variables start when they are typed.
-    pub fn set_time(&mut self, now_us: u64) {
-        self.now_us = self.now_us.max(now_us);
-    }
-
-    /// The earliest instant at which a periodic variable is due (`now_us` for one that has not
-    /// run yet), or `None` if nothing is periodic. A simulated-time port jumps straight there.
-    pub fn next_deadline(&self) -> Option<u64> {
-        self.syms
-            .iter()
-            .flatten()
-            .filter_map(|s| s.task)
-            .map(|t| t.due.unwrap_or(self.now_us))
-            .min()
-    }
-
-    /// Runs every periodic variable that is due at `now_us`, in priority order (rate descending;
-    /// at equal rates producers before consumers; then slot order). A task more than one period
-    /// late runs once, at its latest due instant, and counts the skipped updates instead of
-    /// catching up in a burst. Returns how many updates ran. Time never goes backwards: an older
-    /// `now_us` is treated as the latest one seen.
-    pub fn tick(&mut self, now_us: u64, hal: &mut impl Hal) -> usize {
-        if now_us > self.now_us {
-            self.now_us = now_us;
-        }
-        let now = self.now_us;
-        let mut ran = 0;
-        for k in 0..self.run_len {
-            let i = self.run_order[k] as usize;
-            let Some(mut task) = self.syms[i].as_ref().and_then(|s| s.task) else {
-                continue;
-            };
-            let t = match task.due {
-                None => now,
-                Some(due) if due > now => continue,
-                Some(due) => {
-                    let behind = task.periods_behind(due, now);
-                    if behind > 0 {
-                        task.missed = task
-                            .missed
-                            .saturating_add(behind.min(u32::MAX as u64) as u32);
-                        task.advance(due, behind);
-                    }
-                    task.due.unwrap_or(now)
-                }
-            };
-            task.advance_one(t);
-            task.last = Some(t);
-            if let Some(s) = &mut self.syms[i] {
-                s.task = Some(task);
-            }
-            self.update(i, t, hal);
-            ran += 1;
-        }
-        ran
-    }
-
-    /// One update of periodic slot `i` at instant `t`.
-    fn update(&mut self, i: usize, t: u64, hal: &mut impl Hal) {
-        self.refresh(self.needs[i]);
-        let Some(sym) = self.syms[i] else { return };
-        let mut kind = sym.kind;
-        let value = match &mut kind {
-            Kind::AdcRaw { input, volts } => match hal.adc_read(*input) {
-                Ok(raw) => {
-                    let v = self.volts(*input, raw, hal);
-                    if let Some(s) = &mut self.syms[volts.0 as usize] {
-                        s.value = v;
-                    }
-                    N::from_u32(raw as u32)
-                }
-                Err(_) => sym.value,
-            },
-            Kind::Int { src, st } => st.step(t, self.stored(*src)),
-            Kind::Wind {
-                src,
-                gain,
-                pre,
-                post,
-                st,
-            } => {
-                let x = self.stored(*src) + *gain * (self.stored(*post) - self.stored(*pre));
-                st.step(t, x)
-            }
-            Kind::Diff { src, st } => st.step(t, self.stored(*src)),
-            Kind::Lpf {
-                src,
-                cutoff_hz,
-                last_t,
-            } => {
-                let x = self.stored(*src);
-                let y = match *last_t {
-                    Some(t0) if t > t0 => {
-                        let dt = N::seconds_from_us(t - t0);
-                        let tau = N::ONE / (N::from_f64(core::f64::consts::TAU) * *cutoff_hz);
-                        sym.value + dt / (tau + dt) * (x - sym.value)
-                    }
-                    Some(_) => sym.value,
-                    None => x,
-                };
-                *last_t = Some(t);
-                y
-            }
-            Kind::Pid {
-                src,
-                kp,
-                ki,
-                kd,
-                limits,
-                int,
-                der,
-            } => {
-                let e = self.stored(*src);
-                let (kp, ki, kd) = (self.operand(*kp), self.operand(*ki), self.operand(*kd));
-                let before = int.acc;
-                let i_term = int.step(t, e);
-                let d_term = der.step(t, e);
-                let u = kp * e + ki * i_term + kd * d_term;
-                match *limits {
-                    None => u,
-                    Some((lo, hi)) => {
-                        // Conditional integration: a step that would push the output further
-                        // into saturation only goes as far as the limit (never past the value
-                        // before the step, so it neither winds up nor unwinds by itself).
-                        let limit = if u > hi && e * ki > N::ZERO {
-                            Some(hi)
-                        } else if u < lo && e * ki < N::ZERO {
-                            Some(lo)
-                        } else {
-                            None
-                        };
-                        if let Some(limit) = limit {
-                            let target = (limit - kp * e - kd * d_term) / ki;
-                            let (a, b) = if before <= i_term {
-                                (before, i_term)
-                            } else {
-                                (i_term, before)
-                            };
-                            int.acc = clamp(target, a, b);
-                        }
-                        clamp(kp * e + ki * int.acc + kd * d_term, lo, hi)
-                    }
-                }
-            }
-            Kind::PwmFollow { src, out, .. } => {
-                let x = self.stored(*src) / N::from_u32(100);
-                let duty = if x.is_finite() {
-                    clamp(x, N::ZERO, N::ONE)
-                } else {
-                    N::ZERO
-                };
-                let applied = hal.pwm_set_duty(*out, duty.to_f64() as f32);
-                N::from_f64(applied as f64) * N::from_u32(100)
-            }
-            Kind::GpioIn { pin } => bool_num(hal.gpio_read(*pin)),
-            Kind::GpioOut { src, pin } => {
-                let high = self.stored(*src) >= N::from_f64(0.5);
-                hal.gpio_write(*pin, high);
-                bool_num(high)
-            }
-            Kind::Infile {
-                stream,
-                len,
-                cursor,
-            } => match self.stream_id(*stream) {
-                Some(id) if *len > 0 => {
-                    let v = N::from_f64(hal.input_sample(id, *cursor));
-                    *cursor = (*cursor + 1) % *len;
-                    v
-                }
-                _ => sym.value,
-            },
-            Kind::Log { src, stream } => {
-                let x = self.stored(*src);
-                if let Some(id) = self.stream_id(*stream) {
-                    let mut buf = [0u8; 48];
-                    let mut w = BufWriter::new(&mut buf);
-                    if write!(w, "{}", crate::num::Compact(x)).is_ok() {
-                        hal.write_log(id, w.as_str());
-                    }
-                }
-                x
-            }
-            _ => sym.value,
-        };
-        if let Some(s) = &mut self.syms[i] {
-            s.kind = kind;
-            s.value = value;
-        }
-    }
-
-    pub(crate) fn stream_id(&self, slot: u8) -> Option<StreamId> {
-        self.streams
-            .get(slot as usize)
-            .and_then(|s| s.as_ref())
-            .map(|s| s.id)
-    }
-
-    /// Volts of a raw code (thesis: `[0, vref]` single-ended, `[-vref/2, vref/2]` differential).
-    pub(crate) fn volts(&self, input: AdcInput, raw: u16, hal: &impl Hal) -> N {
-        let vref = N::from_f64(hal.adc_reference_volts() as f64);
-        let fs = N::from_u32(hal.adc_full_scale().max(1) as u32);
-        let v = N::from_u32(raw as u32) * vref / fs;
-        match input {
-            AdcInput::Differential(_) => v - vref / N::from_u32(2),
-            _ => v,
-        }
-    }
 }
 
 #[inline]
@@ -583,14 +360,5 @@ pub(crate) fn clamp<N: Real>(y: N, lo: N, hi: N) -> N {
         hi
     } else {
         y
-    }
-}
-
-#[inline]
-fn bool_num<N: Real>(b: bool) -> N {
-    if b {
-        N::ONE
-    } else {
-        N::ZERO
     }
 }

@@ -1,4 +1,5 @@
-//! Postfix expressions: validation, compilation to ops, evaluation on a fixed stack.
+//! Postfix expressions as typed: tokens, validation, operator words. (Compiled and evaluated
+//! in [`crate::program`].)
 
 use crate::capacity::{MAX_EXPR_TOKENS, MAX_NAME_LEN};
 use crate::error::{tok, Error, Result};
@@ -28,7 +29,7 @@ pub(crate) enum UnOp {
     Exp,
 }
 
-/// One compiled postfix token.
+/// One postfix token, resolved (names to slots, numbers parsed).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) enum Op<N> {
     Lit(N),
@@ -152,85 +153,6 @@ pub(crate) fn validate<N: Real>(command: &'static str, tokens: &[&str]) -> Resul
     Ok(())
 }
 
-#[inline]
-fn apply_bin<N: Real>(op: BinOp, a: N, b: N) -> N {
-    match op {
-        BinOp::Add => a + b,
-        BinOp::Sub => a - b,
-        BinOp::Mul => a * b,
-        BinOp::Div => a / b,
-        BinOp::Min => {
-            if b < a {
-                b
-            } else {
-                a
-            }
-        }
-        BinOp::Max => {
-            if b > a {
-                b
-            } else {
-                a
-            }
-        }
-    }
-}
-
-#[inline]
-fn apply_un<N: Real>(op: UnOp, a: N) -> N {
-    match op {
-        UnOp::Neg => -a,
-        UnOp::Abs => a.abs(),
-        UnOp::Sqrt => a.sqrt(),
-        UnOp::Sin => a.sin(),
-        UnOp::Cos => a.cos(),
-        UnOp::Exp => a.exp(),
-    }
-}
-
-/// Evaluates validated ops; `var` gives the current value of a referenced variable.
-/// The stack is fixed ([`MAX_EXPR_TOKENS`] deep); malformed ops (impossible after [`validate`])
-/// yield NaN rather than a panic.
-pub(crate) fn eval<N: Real>(ops: &[Op<N>], var: impl Fn(VarId) -> N) -> N {
-    let mut stack = [N::ZERO; MAX_EXPR_TOKENS];
-    let mut sp = 0usize;
-    for op in ops {
-        match *op {
-            Op::Lit(_) | Op::Var(_) if sp >= MAX_EXPR_TOKENS => return nan(),
-            Op::Lit(v) => {
-                stack[sp] = v;
-                sp += 1;
-            }
-            Op::Var(id) => {
-                stack[sp] = var(id);
-                sp += 1;
-            }
-            Op::Un(u) => {
-                if sp < 1 {
-                    return nan();
-                }
-                stack[sp - 1] = apply_un(u, stack[sp - 1]);
-            }
-            Op::Bin(b) => {
-                if sp < 2 {
-                    return nan();
-                }
-                stack[sp - 2] = apply_bin(b, stack[sp - 2], stack[sp - 1]);
-                sp -= 1;
-            }
-        }
-    }
-    if sp == 1 {
-        stack[0]
-    } else {
-        nan()
-    }
-}
-
-fn nan<N: Real>() -> N {
-    N::NAN
-}
-
 /// Writes the token text of an op (for `save` and the tree echo).
 pub(crate) fn op_word(op: BinOp) -> &'static str {
     match op {
@@ -260,21 +182,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn validate_and_eval() {
+    fn validation() {
         validate::<f64>("defexp", &["a", "1", "\u{2212}"]).unwrap();
         assert!(validate::<f64>("defexp", &["a", "+"]).is_err());
         assert!(validate::<f64>("defexp", &["a", "b"]).is_err());
         assert!(validate::<f64>("defexp", &["a", "$"]).is_err());
-        let ops = [
-            Op::Var(VarId(0)),
-            Op::Lit(1.0),
-            Op::Bin(BinOp::Sub),
-            Op::Un(UnOp::Abs),
-        ];
-        assert_eq!(eval(&ops, |_| 0.25f64), 0.75);
-        let ops = [Op::Lit(3.0f64), Op::Lit(2.0), Op::Bin(BinOp::Min)];
-        assert_eq!(eval(&ops, |_| 0.0), 2.0);
-        assert!(eval::<f64>(&[Op::Bin(BinOp::Add)], |_| 0.0).is_nan());
     }
 
     #[test]

@@ -8,6 +8,7 @@ use crate::engine::Engine;
 use crate::expr::{op_word, un_word, Op};
 use crate::hal::{AdcInput, PwmOutput};
 use crate::num::{Compact, Real};
+use crate::program::tokens;
 use crate::symbol::{Kind, Operand};
 use crate::VarId;
 
@@ -88,12 +89,18 @@ impl<N: Real> Engine<N> {
         let (start, len) = match sym.kind {
             Kind::Expr { start, len } => (start as usize, len as usize),
             Kind::Const => {
-                let _ = writeln!(out, "{:.6}", sym.value);
+                let _ = writeln!(out, "{:.6}", self.values[id.0 as usize]);
                 return;
             }
             _ => return,
         };
-        let ops = &self.ops[start..start + len];
+        let mut ops = [Op::Lit(N::ZERO); MAX_EXPR_TOKENS];
+        let mut n = 0;
+        for (slot, op) in ops.iter_mut().zip(tokens(&self.ops[start..start + len])) {
+            *slot = op;
+            n += 1;
+        }
+        let ops = &ops[..n];
         let mut kids = [[usize::MAX; 2]; MAX_EXPR_TOKENS];
         let mut stack = [0usize; MAX_EXPR_TOKENS];
         let mut sp = 0;
@@ -154,11 +161,11 @@ impl<N: Real> Engine<N> {
         let rate = Hz(sym.task.map_or(0, |t| t.mhz));
         match sym.kind {
             Kind::Placeholder | Kind::AdcVolts { .. } => return Ok(false),
-            Kind::Const => write!(out, "defexp {name} {}", Compact(sym.value))?,
+            Kind::Const => write!(out, "defexp {name} {}", Compact(self.values[id.0 as usize]))?,
             Kind::Expr { start, len } => {
                 write!(out, "defexp {name}")?;
-                for op in &self.ops[start as usize..(start + len) as usize] {
-                    match *op {
+                for op in tokens(&self.ops[start as usize..(start + len) as usize]) {
+                    match op {
                         Op::Lit(v) => write!(out, " {}", Compact(v))?,
                         Op::Var(v) => write!(out, " {}", self.name_of(v))?,
                         Op::Bin(b) => write!(out, " {}", op_word(b))?,
@@ -212,9 +219,12 @@ impl<N: Real> Engine<N> {
                 }
             }
             Kind::AdcRaw { input, .. } => write!(out, "adc {} {rate}", Chan(input))?,
-            Kind::PwmFixed { out: o, freq } => {
-                write!(out, "pwm {} {freq} {}", Out(o), Compact(sym.value))?
-            }
+            Kind::PwmFixed { out: o, freq } => write!(
+                out,
+                "pwm {} {freq} {}",
+                Out(o),
+                Compact(self.values[id.0 as usize])
+            )?,
             Kind::PwmFollow { src, out: o, freq } => write!(
                 out,
                 "defpwm {name} {} {rate} {} {freq}",

@@ -13,11 +13,34 @@ pub(crate) enum Operand<N> {
     Var(VarId),
 }
 
+/// The length in seconds of a block's latest time step, kept with the step in microseconds:
+/// at a steady rate the step repeats, and converting it again (a 64-bit conversion and a
+/// division, hundreds of cycles in soft float) would give the same bits.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(crate) struct Step<N> {
+    us: u64,
+    s: N,
+}
+
+impl<N: Real> Step<N> {
+    /// `N::seconds_from_us(us)`, converted only when `us` differs from the previous step.
+    /// (The default, 0 µs = 0 s, is the conversion of 0.)
+    #[inline]
+    pub fn seconds(&mut self, us: u64) -> N {
+        if us != self.us {
+            self.us = us;
+            self.s = N::seconds_from_us(us);
+        }
+        self.s
+    }
+}
+
 /// Trapezoid integrator state: `I += (t2 - t1) (x1 + x2) / 2`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct Trapezoid<N> {
     pub last: Option<(u64, N)>,
     pub acc: N,
+    dt: Step<N>,
 }
 
 impl<N: Real> Trapezoid<N> {
@@ -25,8 +48,8 @@ impl<N: Real> Trapezoid<N> {
     #[inline]
     pub fn step(&mut self, t_us: u64, x: N) -> N {
         if let Some((t0, x0)) = self.last {
-            let dt = N::seconds_from_us(t_us.saturating_sub(t0));
-            self.acc = self.acc + (x0 + x) * dt * N::HALF;
+            let dt = self.dt.seconds(t_us.saturating_sub(t0));
+            self.acc = self.acc + ((x0 + x) * dt).halve();
         }
         self.last = Some((t_us, x));
         self.acc
@@ -38,6 +61,7 @@ impl<N: Real> Trapezoid<N> {
 pub(crate) struct TwoPoint<N> {
     pub last: Option<(u64, N)>,
     pub out: N,
+    dt: Step<N>,
 }
 
 impl<N: Real> TwoPoint<N> {
@@ -45,7 +69,7 @@ impl<N: Real> TwoPoint<N> {
     pub fn step(&mut self, t_us: u64, x: N) -> N {
         if let Some((t0, x0)) = self.last {
             if t_us > t0 {
-                self.out = (x - x0) / N::seconds_from_us(t_us - t0);
+                self.out = (x - x0) / self.dt.seconds(t_us - t0);
             }
         }
         self.last = Some((t_us, x));
@@ -53,14 +77,63 @@ impl<N: Real> TwoPoint<N> {
     }
 }
 
-/// What a variable is. `Copy` so an update can take it out, compute, and put it back.
+/// First-order low-pass state: `y += dt/(tau+dt) (x - y)`, `tau = 1/(2 pi fc)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct LowPass<N> {
+    /// `1 / (2 pi fc)`, computed once at definition.
+    tau: N,
+    /// Instant of the previous sample (`None` before the first).
+    last_t: Option<u64>,
+    /// `dt/(tau+dt)` of the latest step (`dt_us` in microseconds; 0 before the first step),
+    /// kept like [`Step`].
+    dt_us: u64,
+    gain: N,
+}
+
+impl<N: Real> LowPass<N> {
+    pub fn new(cutoff_hz: N) -> Self {
+        LowPass {
+            tau: N::ONE / (N::from_f64(core::f64::consts::TAU) * cutoff_hz),
+            last_t: None,
+            dt_us: 0,
+            gain: N::ZERO,
+        }
+    }
+
+    /// The output after sample `x` at `t_us`, from the previous output `y`: the first sample
+    /// passes through; a repeated instant leaves `y`.
+    #[inline]
+    pub fn step(&mut self, t_us: u64, x: N, y: N) -> N {
+        let out = match self.last_t {
+            Some(t0) if t_us > t0 => {
+                let us = t_us - t0;
+                if us != self.dt_us {
+                    let dt = N::seconds_from_us(us);
+                    self.dt_us = us;
+                    self.gain = dt / (self.tau + dt);
+                }
+                y + self.gain * (x - y)
+            }
+            Some(_) => y,
+            None => x,
+        };
+        self.last_t = Some(t_us);
+        out
+    }
+}
+
+/// What a variable is. `Copy` so a command can take it out, change it, and put it back.
+/// `repr(u8)`: an explicit one-byte tag (same size here) instead of a discriminant hidden in
+/// a 64-bit field's spare values, which made every `match` on a Cortex-M0+ a chain of 64-bit
+/// compares.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(u8)]
 pub(crate) enum Kind<N> {
     /// Referenced before being defined; reads as 0.
     Placeholder,
     /// `defexp name <number>`: a settable constant.
     Const,
-    /// `defexp`: postfix ops `ops[start..start+len]`, evaluated lazily.
+    /// `defexp`: compiled instructions `ops[start..start+len]`, evaluated lazily.
     Expr { start: u16, len: u16 },
     /// `defscale`: `[a,b] -> [c,d]`, hard-limited to `[c,d]`, lazy.
     Scale { src: VarId, a: N, b: N, c: N, d: N },
@@ -82,7 +155,7 @@ pub(crate) enum Kind<N> {
     Lpf {
         src: VarId,
         cutoff_hz: N,
-        last_t: Option<u64>,
+        st: LowPass<N>,
     },
     /// `defpid`: `kp e + ki I(e) + kd D(e)`, optionally clamped with conditional integration.
     Pid {
@@ -175,7 +248,10 @@ impl<N> Kind<N> {
     }
 
     /// Calls `f` for every variable this one reads (expression variables via `ops`).
-    pub fn for_each_ref(&self, ops: &[crate::expr::Op<N>], mut f: impl FnMut(VarId)) {
+    pub fn for_each_ref(&self, ops: &[crate::program::Instr<N>], mut f: impl FnMut(VarId))
+    where
+        N: Copy,
+    {
         let operand = |o: &Operand<N>, f: &mut dyn FnMut(VarId)| {
             if let Operand::Var(v) = o {
                 f(*v)
@@ -184,10 +260,13 @@ impl<N> Kind<N> {
         match self {
             Kind::Expr { start, len } => {
                 let (s, l) = (*start as usize, *len as usize);
-                for op in ops.get(s..s + l).unwrap_or(&[]) {
-                    if let crate::expr::Op::Var(v) = op {
-                        f(*v)
-                    }
+                for v in ops
+                    .get(s..s + l)
+                    .unwrap_or(&[])
+                    .iter()
+                    .filter_map(|i| i.var())
+                {
+                    f(v)
                 }
             }
             Kind::Scale { src, .. }
@@ -260,14 +339,18 @@ impl Task {
         self.frac = 0;
     }
 
-    /// Sets `due` one period after `from`.
+    /// Sets `due` one period after `from`, and returns it.
     #[inline]
-    pub fn advance_one(&mut self, from: u64) {
-        // frac < mhz and r < mhz, so the sum fits in u64 and carries at most one microsecond.
-        let f = self.frac as u64 + self.r as u64;
-        let carry = (f >= self.mhz as u64) as u64;
-        self.frac = (f - carry * self.mhz as u64) as u32;
-        self.due = Some(from.saturating_add(self.q as u64 + carry));
+    pub fn advance_one(&mut self, from: u64) -> u64 {
+        // frac < mhz and r < mhz, so the sum carries at most one microsecond. In 32 bits (a
+        // sum past u32::MAX is a carry too): 64-bit arithmetic costs several instructions per
+        // operation on a Cortex-M0+.
+        let (f, wrapped) = self.frac.overflowing_add(self.r);
+        let carry = wrapped || f >= self.mhz;
+        self.frac = if carry { f.wrapping_sub(self.mhz) } else { f };
+        let due = from.saturating_add(self.q as u64 + carry as u64);
+        self.due = Some(due);
+        due
     }
 
     /// Sets `due` `n` periods after `from` (the late path: 128-bit arithmetic).
@@ -296,7 +379,6 @@ impl Task {
 pub(crate) struct Symbol<N> {
     pub name: Name,
     pub kind: Kind<N>,
-    pub value: N,
     pub task: Option<Task>,
 }
 
@@ -316,6 +398,27 @@ impl SymSet {
     pub fn union(&mut self, other: &SymSet) {
         for (a, b) in self.0.iter_mut().zip(other.0.iter()) {
             *a |= *b;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The on-time step (32-bit) agrees with the general one (128-bit) for every rate, up to
+    /// rates whose fractional sums pass u32::MAX.
+    #[test]
+    fn advance_one_is_advance_by_one_period() {
+        for mhz in [1, 3, 7_000, 999_999, 100_000_000, (1 << 31) + 5, u32::MAX] {
+            let (mut a, mut b) = (Task::new(mhz), Task::new(mhz));
+            let mut t = 0u64;
+            for _ in 0..2_000 {
+                a.advance_one(t);
+                b.advance(t, 1);
+                assert_eq!(a, b, "{mhz} mHz at {t} us");
+                t = a.due.unwrap_or(0);
+            }
         }
     }
 }

@@ -159,6 +159,37 @@ fn late_ticks_skip_and_count_instead_of_bursting() {
 }
 
 #[test]
+fn next_deadline_follows_definitions_rates_and_deletions_without_a_tick() {
+    let (mut e, mut b) = engine();
+    assert_eq!(e.next_deadline(), None, "nothing periodic");
+    e.set_time(5_000);
+    run(&mut e, &mut b, "defint I x 100");
+    assert_eq!(e.next_deadline(), Some(5_000), "a new task is due at once");
+    assert_eq!(e.tick(5_000, &mut b), 1);
+    assert_eq!(e.next_deadline(), Some(15_000));
+    e.set_time(7_000);
+    run(&mut e, &mut b, "defdiff D x 1000");
+    assert_eq!(e.next_deadline(), Some(7_000));
+    assert_eq!(e.tick(7_000, &mut b), 1, "only D is due");
+    assert_eq!(e.next_deadline(), Some(8_000));
+    assert_eq!(e.tick(7_999, &mut b), 0, "nothing due before 8 ms");
+    // A new rate keeps the next update where it was.
+    run(
+        &mut e,
+        &mut b,
+        "rate I 1000
+del D",
+    );
+    assert_eq!(e.next_deadline(), Some(15_000));
+    // 5 ms late at 1 kHz: one update at the latest due instant (20 ms), the next at 21 ms.
+    assert_eq!(e.tick(20_500, &mut b), 1);
+    assert_eq!(e.next_deadline(), Some(21_000));
+    assert_eq!(e.missed_updates(e.lookup("I").unwrap()), Some(5));
+    run(&mut e, &mut b, "del I");
+    assert_eq!(e.next_deadline(), None);
+}
+
+#[test]
 fn save_writes_a_script_that_recreates_the_table() {
     let (mut e, mut b) = engine();
     b = b.with_input("sig.txt", vec![0.5]);
@@ -244,6 +275,39 @@ fn help_lists_menus_and_capacities() {
         let out = run(&mut e, &mut b, &format!("help {}", c.name));
         assert!(out.contains(c.summary), "{}", c.name);
     }
+}
+
+#[test]
+fn the_expression_capacity_counts_tokens_as_typed() {
+    let (mut e, mut b) = engine();
+    let cap = score_core::capacity::MAX_EXPR_OPS;
+    let per = score_core::capacity::MAX_EXPR_TOKENS;
+    // k 1 + 1 + ... abs: 32 tokens (stored compiled in fewer instructions; the limit is the
+    // tokens).
+    let long = format!("k{} abs", " 1 +".repeat((per - 2) / 2));
+    assert_eq!(long.split(' ').count(), per);
+    for i in 0..cap / per {
+        run(&mut e, &mut b, &format!("defexp e{i} {long}"));
+    }
+    let out = run(&mut e, &mut b, "capacities");
+    assert!(
+        out.contains(&format!("{cap} of {cap} expression tokens")),
+        "{out}"
+    );
+    let before = e.clone();
+    let err = e
+        .execute("defexp z k abs", &mut b, &mut String::new())
+        .unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        format!("defexp: no room: expression tokens (capacity {cap}; see 'capacities')")
+    );
+    assert_eq!(e, before);
+    // Redefining counts the new tokens instead of the old ones.
+    run(&mut e, &mut b, &format!("defexp e0 {long}"));
+    run(&mut e, &mut b, "defexp e0 k 1 +\ndefexp z k abs");
+    assert_eq!(e.value_of("z"), Some(0.0));
+    assert_eq!(e.value_of("e1"), Some(15.0));
 }
 
 #[test]

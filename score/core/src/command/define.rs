@@ -9,7 +9,8 @@ use crate::expr::{self, Class, Op};
 use crate::hal::Hal;
 use crate::lexer::parse_number;
 use crate::num::Real;
-use crate::symbol::{Family, Kind, Operand, Symbol, Task, Trapezoid, TwoPoint};
+use crate::program::{self, tokens_in};
+use crate::symbol::{Family, Kind, LowPass, Operand, Symbol, Task, Trapezoid, TwoPoint};
 use crate::VarId;
 
 use super::args::Args;
@@ -131,9 +132,9 @@ impl<N: Real> Engine<N> {
         self.syms[id.0 as usize] = Some(Symbol {
             name: mk_name(name),
             kind,
-            value,
             task: task.map(Task::new),
         });
+        self.values[id.0 as usize] = value;
         self.collect_placeholders();
         self.rebuild();
         id
@@ -178,11 +179,13 @@ impl<N: Real> Engine<N> {
             self.commit(name, &[], None, v, hal, |_, _| Kind::Const);
         } else {
             self.check_refs("defexp", name, target, refs, true)?;
-            let old_len = match target.and_then(|t| self.sym(t)).map(|s| s.kind) {
-                Some(Kind::Expr { len, .. }) => len as usize,
+            let old_tokens = match target.and_then(|t| self.sym(t)).map(|s| s.kind) {
+                Some(Kind::Expr { start, len }) => {
+                    tokens_in(&self.ops[start as usize..(start + len) as usize])
+                }
                 _ => 0,
             };
-            if self.ops_used - old_len + toks.len() > crate::capacity::MAX_EXPR_OPS {
+            if self.tokens_used() - old_tokens + toks.len() > crate::capacity::MAX_EXPR_OPS {
                 return Err(Error::Full {
                     command: "defexp",
                     what: "expression tokens",
@@ -190,21 +193,23 @@ impl<N: Real> Engine<N> {
                 });
             }
             self.commit(name, refs, None, N::ZERO, hal, |e, _| {
-                let start = e.ops_used;
-                for t in toks {
-                    let op = match expr::classify::<N>(t) {
+                let mut ops = [Op::Lit(N::ZERO); crate::capacity::MAX_EXPR_TOKENS];
+                for (op, t) in ops.iter_mut().zip(toks) {
+                    *op = match expr::classify::<N>(t) {
                         Some(Class::Lit(v)) => Op::Lit(v),
                         Some(Class::Name(n)) => Op::Var(e.resolve(n)),
                         Some(Class::Bin(b)) => Op::Bin(b),
                         Some(Class::Un(u)) => Op::Un(u),
                         None => Op::Lit(N::ZERO),
                     };
-                    e.ops[e.ops_used] = op;
-                    e.ops_used += 1;
                 }
+                // At most one instruction per token: the token check above keeps it in room.
+                let start = e.ops_used;
+                let len = program::compile(&ops[..toks.len()], &mut e.ops[start..]);
+                e.ops_used += len;
                 Kind::Expr {
                     start: start as u16,
-                    len: toks.len() as u16,
+                    len: len as u16,
                 }
             });
         }
@@ -314,7 +319,7 @@ impl<N: Real> Engine<N> {
                 self.commit(name, &[src], Some(rate), N::ZERO, hal, |e, _| Kind::Lpf {
                     src: e.resolve(src),
                     cutoff_hz: fc,
-                    last_t: None,
+                    st: LowPass::new(fc),
                 });
             }
             _ => {
@@ -383,7 +388,6 @@ pub(super) fn placeholder<N: Real>(name: &str) -> Symbol<N> {
     Symbol {
         name: mk_name(name),
         kind: Kind::Placeholder,
-        value: N::ZERO,
         task: None,
     }
 }

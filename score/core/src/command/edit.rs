@@ -58,7 +58,7 @@ impl<N: Real> Engine<N> {
         };
         if let Some(s) = &mut self.syms[id.0 as usize] {
             s.kind = kind;
-            s.value = stored;
+            self.values[id.0 as usize] = stored;
         }
         Ok(())
     }
@@ -116,6 +116,7 @@ impl<N: Real> Engine<N> {
             self.release(hw, hal);
         }
         self.syms[id.0 as usize] = None;
+        self.values[id.0 as usize] = N::ZERO;
     }
 
     pub(super) fn release(&mut self, hw: Hw, hal: &mut impl Hal) {
@@ -151,6 +152,7 @@ impl<N: Real> Engine<N> {
                 && !self.has_users(VarId(i as u8))
             {
                 self.syms[i] = None;
+                self.values[i] = N::ZERO;
             }
         }
     }

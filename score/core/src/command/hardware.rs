@@ -245,7 +245,7 @@ impl<N: Real> Engine<N> {
         hal.adc_configure(input, hz)
             .map_err(|e| hal_err("adc", t_ch, e))?;
         let code = hal.adc_read(input).unwrap_or(0);
-        let v = self.volts(input, code, hal);
+        let v = Self::volts(input, code, hal);
         let slot = |e: &mut Self, n: &str| match e.lookup(n) {
             Some(id) => id,
             None => {
@@ -259,15 +259,15 @@ impl<N: Real> Engine<N> {
         self.syms[rid.0 as usize] = Some(Symbol {
             name: raw_name,
             kind: Kind::AdcRaw { input, volts: vid },
-            value: N::from_u32(code as u32),
             task: Some(Task::new(rate)),
         });
+        self.values[rid.0 as usize] = N::from_u32(code as u32);
         self.syms[vid.0 as usize] = Some(Symbol {
             name: volts_name,
             kind: Kind::AdcVolts { raw: rid },
-            value: v,
             task: None,
         });
+        self.values[vid.0 as usize] = v;
         self.rebuild();
         Ok(())
     }

@@ -100,7 +100,7 @@ impl<N: Real> Engine<N> {
                     core::mem::size_of::<Self>(),
                     self.len(),
                     MAX_SYMBOLS,
-                    self.ops_used,
+                    self.tokens_used(),
                     crate::capacity::MAX_EXPR_OPS
                 );
             }
