@@ -2,8 +2,8 @@
 //! same 0.10.0 as the crate) talks to this Rust process using only the ctypes mirror printed in
 //! bus/ABI.md, which this test extracts from the document itself.
 
+use conductor_testkit::{python, workspace};
 use std::io::{BufRead, BufReader};
-use std::path::PathBuf;
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -11,23 +11,6 @@ use std::time::{Duration, Instant};
 use conductor_bus::{
     monotonic_ns, status, Bus, CommandReceiver, Domain, StateMeta, StatePublisher, StateSpec,
 };
-
-fn workspace() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// The venv that `cargo xtask test` creates with the PyPI packages of the interop tests.
-fn python() -> PathBuf {
-    let py = std::env::var_os("CONDUCTOR_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
-    assert!(
-        py.exists(),
-        "{} not found: run `cargo xtask test` (it creates the venv with iceoryx2==0.10.0)",
-        py.display()
-    );
-    py
-}
 
 /// The ```python block after `<!-- conductor_abi.py -->` in bus/ABI.md.
 fn abi_mirror_from_doc() -> String {

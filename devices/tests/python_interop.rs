@@ -2,6 +2,7 @@
 //! our Dynamixel simulator, and `python-can`'s `slcan` interface drives our SLCAN adapter
 //! simulator, each over a pseudo-terminal, exactly as they would a U2D2 or a CANable.
 
+use conductor_testkit::python;
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -12,23 +13,6 @@ use conductor_devices::sim::fault::FaultConfig;
 use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_protocols::slcan::Dialect;
-
-fn workspace() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-/// The venv that `cargo xtask test` creates with tools/python-requirements.txt.
-fn python() -> PathBuf {
-    let py = std::env::var_os("CONDUCTOR_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
-    assert!(
-        py.exists(),
-        "{} not found: run `cargo xtask test` (it creates the venv from tools/python-requirements.txt)",
-        py.display()
-    );
-    py
-}
 
 fn run_script(script: &str, args: &[&str]) -> String {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -6,28 +6,12 @@
 //! 1e-6 rad; the plant integrates, so no steady offset can remain. 0.01 rad leaves room for the
 //! loop delays of a loaded machine, which slow the transient but do not stop it.
 
-use std::path::PathBuf;
+use conductor_testkit::{python, workspace};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{Bus, Domain, StateSubscriber};
 use conductor_examples::{motor, sim};
-
-fn workspace() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
-}
-
-fn python() -> PathBuf {
-    let py = std::env::var_os("CONDUCTOR_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
-    assert!(
-        py.exists(),
-        "{} not found: run `cargo xtask setup` (the venv of tools/python-requirements.txt, with iceoryx2)",
-        py.display()
-    );
-    py
-}
 
 fn position(d: &Domain) -> f64 {
     let bus = Bus::open(d, "check").unwrap();

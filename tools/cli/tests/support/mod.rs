@@ -13,9 +13,7 @@ use conductor_bus::{Domain, StateMeta, StateSpec};
 use conductor_examples::sim::{self, SimHandle, SimSpec};
 use serde_json::Value;
 
-pub fn workspace() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
+pub use conductor_testkit::workspace;
 
 /// `conductor --domain <d>`.
 pub fn conductor(d: &Domain) -> Command {
@@ -174,19 +172,7 @@ impl Drop for Bg {
     }
 }
 
-/// The venv that `cargo xtask test` creates (`tools/python-requirements.txt`), or
-/// `$CONDUCTOR_PYTHON`.
-pub fn python() -> PathBuf {
-    let py = std::env::var_os("CONDUCTOR_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
-    assert!(
-        py.exists(),
-        "{} not found: run `cargo xtask setup` (or create the venv from tools/python-requirements.txt: mcap, jsonschema, iceoryx2)",
-        py.display()
-    );
-    py
-}
+pub use conductor_testkit::python;
 
 /// A fresh temporary directory for one test.
 pub fn tempdir(tag: &str) -> PathBuf {

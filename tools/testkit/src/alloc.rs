@@ -1,0 +1,62 @@
+//! A global allocator that counts the current thread's allocations while it measures.
+//!
+//! ```ignore
+//! #[global_allocator]
+//! static GLOBAL: conductor_testkit::alloc::Counting = conductor_testkit::alloc::Counting;
+//!
+//! let (_, allocations) = conductor_testkit::alloc::measure(|| rt_tick());
+//! assert_eq!(allocations, 0);
+//! ```
+//!
+//! Only allocations made by the measuring thread, inside [`measure`], are counted, so the test
+//! harness's own threads do not disturb the figure.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+static ALLOCS: AtomicU64 = AtomicU64::new(0);
+thread_local!(static MEASURING: Cell<bool> = const { Cell::new(false) });
+
+/// The system allocator, counting `alloc` and `realloc` calls made inside [`measure`].
+pub struct Counting;
+
+fn count() {
+    if MEASURING.with(Cell::get) {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+// SAFETY: every call is forwarded unchanged to the system allocator; counting touches only an
+// atomic and a const-initialised thread-local, neither of which allocates.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, l: Layout) -> *mut u8 {
+        count();
+        // SAFETY: the caller upholds GlobalAlloc::alloc's contract, which we pass on.
+        unsafe { System.alloc(l) }
+    }
+    unsafe fn alloc_zeroed(&self, l: Layout) -> *mut u8 {
+        count();
+        // SAFETY: as for alloc.
+        unsafe { System.alloc_zeroed(l) }
+    }
+    unsafe fn dealloc(&self, p: *mut u8, l: Layout) {
+        // SAFETY: `p` was allocated by System with `l` (we forward every allocation).
+        unsafe { System.dealloc(p, l) }
+    }
+    unsafe fn realloc(&self, p: *mut u8, l: Layout, n: usize) -> *mut u8 {
+        count();
+        // SAFETY: as for dealloc; the caller upholds realloc's contract.
+        unsafe { System.realloc(p, l, n) }
+    }
+}
+
+/// Runs `f` and returns its result with the number of allocations this thread made meanwhile.
+/// Meaningful only in a test binary whose `#[global_allocator]` is [`Counting`].
+pub fn measure<R>(f: impl FnOnce() -> R) -> (R, u64) {
+    let before = ALLOCS.load(Ordering::Relaxed);
+    MEASURING.with(|m| m.set(true));
+    let r = f();
+    MEASURING.with(|m| m.set(false));
+    (r, ALLOCS.load(Ordering::Relaxed) - before)
+}

@@ -1,0 +1,36 @@
+//! # conductor-testkit
+//!
+//! What several test suites of the workspace need, in one place:
+//!
+//! * [`workspace`] — the workspace root, for fixtures that live outside a crate (`deploy/`,
+//!   `bus/ABI.md`, ...).
+//! * [`python`] — the interpreter of the venv that `cargo xtask test` creates with the PyPI
+//!   packages of the interop tests (`tools/python-requirements.txt`); tests fail, never skip,
+//!   when it is missing.
+//! * [`alloc`] — a counting global allocator, to prove that a real-time path allocates nothing.
+
+use std::path::PathBuf;
+
+pub mod alloc;
+
+/// The workspace root.
+pub fn workspace() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .expect("the workspace root exists")
+}
+
+/// `$CONDUCTOR_PYTHON`, else `<workspace>/.venv/bin/python`; panics with the fix when absent.
+pub fn python() -> PathBuf {
+    let py = std::env::var_os("CONDUCTOR_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace().join(".venv/bin/python"));
+    assert!(
+        py.exists(),
+        "{} not found: run `cargo xtask setup` (it creates the venv with the packages of \
+         tools/python-requirements.txt)",
+        py.display()
+    );
+    py
+}
