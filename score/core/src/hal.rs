@@ -163,13 +163,29 @@ pub trait Serial {
 pub trait Hal: Adc + Pwm + Gpio + DataFiles {}
 impl<T: Adc + Pwm + Gpio + DataFiles> Hal for T {}
 
-/// A board that accepts every configuration and reads mid-scale: for tests, fuzzing and docs.
+/// A board that accepts every configuration and reads a fixed code: for tests, fuzzing and docs.
 /// Four single-ended channels, two differential pairs, a temperature sensor (10-bit, 3.0 V like
-/// the thesis' board), eight PWM outputs, eight pins, no files.
-#[derive(Debug, Default, Clone, PartialEq)]
+/// the thesis' board), eight PWM outputs, eight pins, no files. Every ADC read returns
+/// [`adc_code`](Self::adc_code) (mid-scale, 512, by default) and every input pin reads
+/// [`pin_level`](Self::pin_level) (low by default).
+#[derive(Debug, Clone, PartialEq)]
 pub struct DummyHal {
     /// Last duty fraction set per output (single outputs; pairs write their first output).
     pub duty: [f32; 8],
+    /// The code every ADC conversion returns.
+    pub adc_code: u16,
+    /// The level every input pin reads.
+    pub pin_level: bool,
+}
+
+impl Default for DummyHal {
+    fn default() -> Self {
+        Self {
+            duty: [0.0; 8],
+            adc_code: 512,
+            pin_level: false,
+        }
+    }
 }
 
 impl Adc for DummyHal {
@@ -193,7 +209,7 @@ impl Adc for DummyHal {
     }
     fn adc_release(&mut self, _: AdcInput) {}
     fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
-        Ok(512)
+        Ok(self.adc_code)
     }
 }
 
@@ -225,10 +241,115 @@ impl Gpio for DummyHal {
         Ok(())
     }
     fn gpio_read(&mut self, _: u8) -> bool {
-        false
+        self.pin_level
     }
     fn gpio_write(&mut self, _: u8, _: bool) {}
     fn gpio_release(&mut self, _: u8) {}
 }
 
 impl DataFiles for DummyHal {}
+
+/// A board with no peripherals that plays one in-memory signal through `infile`: whatever the
+/// file name, `infile` opens [`signal`](Self::signal) (the engine loops it, one sample per
+/// update). No ADC inputs, PWM outputs or pins (configuring one is refused with
+/// [`HalError::NoSuchChannel`]); `log` is unsupported. For benchmarks and tests of algorithms
+/// fed by a recorded signal, such as the thesis' Fig. 5.20 PID ([`crate::FIG_5_20_PID`]), on the
+/// host and in the firmware alike: `S` is anything that lends a `[f64]` (an array, a slice, a
+/// `Vec`), so no heap is needed.
+///
+/// ```
+/// use score_core::{hal::PlaybackHal, Engine};
+/// let mut hal = PlaybackHal::new([0.5, -0.25]);
+/// let mut score: Engine<f64> = Engine::new();
+/// let mut out = String::new();
+/// score.execute("infile e 1000 any-name", &mut hal, &mut out).unwrap();
+/// let seen: Vec<f64> = (0..4u64)
+///     .map(|k| {
+///         score.tick(k * 1000, &mut hal);
+///         score.value_of("e").unwrap()
+///     })
+///     .collect();
+/// assert_eq!(seen, [0.5, -0.25, 0.5, -0.25]);
+/// assert!(score.execute("adc 0 100", &mut hal, &mut out).is_err());
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaybackHal<S> {
+    /// The samples `infile` plays, in order.
+    pub signal: S,
+}
+
+impl<S: AsRef<[f64]>> PlaybackHal<S> {
+    /// A board playing `signal`.
+    pub const fn new(signal: S) -> Self {
+        Self { signal }
+    }
+}
+
+/// No inputs; the converter's scale is a nominal 12-bit, 3.3 V one.
+impl<S> Adc for PlaybackHal<S> {
+    fn adc_channels(&self) -> u8 {
+        0
+    }
+    fn adc_differential_pairs(&self) -> u8 {
+        0
+    }
+    fn adc_has_temperature(&self) -> bool {
+        false
+    }
+    fn adc_full_scale(&self) -> u16 {
+        4095
+    }
+    fn adc_reference_volts(&self) -> f32 {
+        3.3
+    }
+    fn adc_configure(&mut self, _: AdcInput, _: f32) -> Result<(), HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+    fn adc_release(&mut self, _: AdcInput) {}
+    fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+}
+
+impl<S> Pwm for PlaybackHal<S> {
+    fn pwm_outputs(&self) -> u8 {
+        0
+    }
+    fn pwm_configure(&mut self, _: PwmOutput, _: f32) -> Result<f32, HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+    fn pwm_set_duty(&mut self, _: PwmOutput, duty: f32) -> f32 {
+        duty
+    }
+    fn pwm_release(&mut self, _: PwmOutput) {}
+}
+
+impl<S> Gpio for PlaybackHal<S> {
+    fn gpio_pins(&self) -> u8 {
+        0
+    }
+    fn gpio_configure(&mut self, _: u8, _: bool) -> Result<(), HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+    fn gpio_read(&mut self, _: u8) -> bool {
+        false
+    }
+    fn gpio_write(&mut self, _: u8, _: bool) {}
+    fn gpio_release(&mut self, _: u8) {}
+}
+
+impl<S: AsRef<[f64]>> DataFiles for PlaybackHal<S> {
+    fn open_input(&mut self, _path: &str) -> Result<StreamId, HalError> {
+        Ok(StreamId(0))
+    }
+    fn input_len(&self, _: StreamId) -> u32 {
+        self.signal.as_ref().len().min(u32::MAX as usize) as u32
+    }
+    fn input_sample(&self, _: StreamId, index: u32) -> f64 {
+        self.signal
+            .as_ref()
+            .get(index as usize)
+            .copied()
+            .unwrap_or(0.0)
+    }
+}

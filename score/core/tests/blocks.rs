@@ -73,10 +73,7 @@ fn pid_with_limits_does_not_wind_up() {
 #[test]
 fn gpio_and_temperature_channels() {
     let mut e: Engine<Num> = Engine::new();
-    let mut b = MemBoard {
-        adc_code: 200,
-        ..Default::default()
-    };
+    let mut b = MemBoard::default().with_adc_code(200);
     run(
         &mut e,
         &mut b,

@@ -7,10 +7,7 @@ use score_core::{Engine, Error, Num, VarKind};
 fn engine() -> (Engine<Num>, MemBoard) {
     (
         Engine::new(),
-        MemBoard {
-            adc_code: 330,
-            ..Default::default()
-        },
+        MemBoard::default().with_adc_code(330),
     )
 }
 
@@ -340,4 +337,31 @@ fn last_update_reports_the_scheduled_instant_of_the_latest_update() {
         None,
         "bare expressions have no schedule"
     );
+}
+
+#[test]
+fn playback_board_plays_its_signal_for_fig_5_20_and_has_no_peripherals() {
+    use score_core::hal::PlaybackHal;
+    let signal = [0.0, 0.01, -0.02, 0.03];
+    let mut hal = PlaybackHal::new(signal);
+    let mut e: Engine<Num> = Engine::new();
+    let mut out = String::new();
+    for line in score_core::FIG_5_20_PID.lines() {
+        e.execute(line, &mut hal, &mut out).expect(line);
+    }
+    // One sample per 1 kHz update, looping; the first is read when `infile` is typed.
+    for k in 0..10u64 {
+        e.tick(k * 1000, &mut hal);
+        assert_eq!(e.value_of("sgnl"), Some(signal[k as usize % 4] as Num), "update {k}");
+    }
+    for (line, message) in [
+        ("adc 0 100", "adc: '0' is not an ADC channel of this board (expected none)"),
+        ("adc T 100", "adc: 'T' is not an ADC channel of this board (expected none)"),
+        ("pwm 0 1000 50", "pwm: '0' is not a PWM output of this board (expected none)"),
+        ("gpio 0 10", "gpio: '0' is not a GPIO pin number of this board"),
+        ("log PID 10 out", "log: not available on this port (the hardware or file system is missing)"),
+    ] {
+        let err = e.execute(line, &mut hal, &mut out).unwrap_err();
+        assert_eq!(err.to_string(), message);
+    }
 }

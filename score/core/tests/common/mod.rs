@@ -1,20 +1,41 @@
-//! Test board: the dummy HAL plus in-memory playback and log files.
+//! Test board: the dummy HAL's peripherals plus in-memory playback and log files.
 #![allow(dead_code)]
 
 use score_core::hal::*;
 use score_core::{Engine, Num, Outcome};
 
-#[derive(Default)]
+/// [`DummyHal`]'s peripherals (reading ADC code 0 and high pins unless told otherwise) with
+/// named in-memory playback inputs and logs.
 pub struct MemBoard {
     pub hw: DummyHal,
     pub inputs: Vec<(String, Vec<f64>)>,
     pub open: Vec<Option<usize>>,
     pub logs: Vec<(String, Vec<String>)>,
     pub log_open: Vec<Option<usize>>,
-    pub adc_code: u16,
+}
+
+impl Default for MemBoard {
+    fn default() -> Self {
+        Self {
+            hw: DummyHal {
+                adc_code: 0,
+                pin_level: true,
+                ..DummyHal::default()
+            },
+            inputs: Vec::new(),
+            open: Vec::new(),
+            logs: Vec::new(),
+            log_open: Vec::new(),
+        }
+    }
 }
 
 impl MemBoard {
+    /// Every ADC conversion returns `code`.
+    pub fn with_adc_code(mut self, code: u16) -> Self {
+        self.hw.adc_code = code;
+        self
+    }
     pub fn with_input(mut self, path: &str, data: Vec<f64>) -> Self {
         self.inputs.push((path.into(), data));
         self
@@ -32,32 +53,34 @@ impl MemBoard {
 
 impl Adc for MemBoard {
     fn adc_channels(&self) -> u8 {
-        4
+        self.hw.adc_channels()
     }
     fn adc_differential_pairs(&self) -> u8 {
-        2
+        self.hw.adc_differential_pairs()
     }
     fn adc_has_temperature(&self) -> bool {
-        true
+        self.hw.adc_has_temperature()
     }
     fn adc_full_scale(&self) -> u16 {
-        1023
+        self.hw.adc_full_scale()
     }
     fn adc_reference_volts(&self) -> f32 {
-        3.0
+        self.hw.adc_reference_volts()
     }
-    fn adc_configure(&mut self, _: AdcInput, _: f32) -> Result<(), HalError> {
-        Ok(())
+    fn adc_configure(&mut self, i: AdcInput, rate_hz: f32) -> Result<(), HalError> {
+        self.hw.adc_configure(i, rate_hz)
     }
-    fn adc_release(&mut self, _: AdcInput) {}
-    fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
-        Ok(self.adc_code)
+    fn adc_release(&mut self, i: AdcInput) {
+        self.hw.adc_release(i)
+    }
+    fn adc_read(&mut self, i: AdcInput) -> Result<u16, HalError> {
+        self.hw.adc_read(i)
     }
 }
 
 impl Pwm for MemBoard {
     fn pwm_outputs(&self) -> u8 {
-        8
+        self.hw.pwm_outputs()
     }
     fn pwm_configure(&mut self, o: PwmOutput, f: f32) -> Result<f32, HalError> {
         self.hw.pwm_configure(o, f)
@@ -65,21 +88,27 @@ impl Pwm for MemBoard {
     fn pwm_set_duty(&mut self, o: PwmOutput, d: f32) -> f32 {
         self.hw.pwm_set_duty(o, d)
     }
-    fn pwm_release(&mut self, _: PwmOutput) {}
+    fn pwm_release(&mut self, o: PwmOutput) {
+        self.hw.pwm_release(o)
+    }
 }
 
 impl Gpio for MemBoard {
     fn gpio_pins(&self) -> u8 {
-        8
+        self.hw.gpio_pins()
     }
-    fn gpio_configure(&mut self, _: u8, _: bool) -> Result<(), HalError> {
-        Ok(())
+    fn gpio_configure(&mut self, pin: u8, output: bool) -> Result<(), HalError> {
+        self.hw.gpio_configure(pin, output)
     }
-    fn gpio_read(&mut self, _: u8) -> bool {
-        true
+    fn gpio_read(&mut self, pin: u8) -> bool {
+        self.hw.gpio_read(pin)
     }
-    fn gpio_write(&mut self, _: u8, _: bool) {}
-    fn gpio_release(&mut self, _: u8) {}
+    fn gpio_write(&mut self, pin: u8, high: bool) {
+        self.hw.gpio_write(pin, high)
+    }
+    fn gpio_release(&mut self, pin: u8) {
+        self.hw.gpio_release(pin)
+    }
 }
 
 impl DataFiles for MemBoard {
