@@ -5,10 +5,7 @@ use common::{run, run_until, MemBoard};
 use score_core::{Engine, Error, Num, VarKind};
 
 fn engine() -> (Engine<Num>, MemBoard) {
-    (
-        Engine::new(),
-        MemBoard::default().with_adc_code(330),
-    )
+    (Engine::new(), MemBoard::default().with_adc_code(330))
 }
 
 #[test]
@@ -352,14 +349,33 @@ fn playback_board_plays_its_signal_for_fig_5_20_and_has_no_peripherals() {
     // One sample per 1 kHz update, looping; the first is read when `infile` is typed.
     for k in 0..10u64 {
         e.tick(k * 1000, &mut hal);
-        assert_eq!(e.value_of("sgnl"), Some(signal[k as usize % 4] as Num), "update {k}");
+        assert_eq!(
+            e.value_of("sgnl"),
+            Some(signal[k as usize % 4] as Num),
+            "update {k}"
+        );
     }
     for (line, message) in [
-        ("adc 0 100", "adc: '0' is not an ADC channel of this board (expected none)"),
-        ("adc T 100", "adc: 'T' is not an ADC channel of this board (expected none)"),
-        ("pwm 0 1000 50", "pwm: '0' is not a PWM output of this board (expected none)"),
-        ("gpio 0 10", "gpio: '0' is not a GPIO pin number of this board"),
-        ("log PID 10 out", "log: not available on this port (the hardware or file system is missing)"),
+        (
+            "adc 0 100",
+            "adc: '0' is not an ADC channel of this board (expected none)",
+        ),
+        (
+            "adc T 100",
+            "adc: 'T' is not an ADC channel of this board (expected none)",
+        ),
+        (
+            "pwm 0 1000 50",
+            "pwm: '0' is not a PWM output of this board (expected none)",
+        ),
+        (
+            "gpio 0 10",
+            "gpio: '0' is not a GPIO pin number of this board",
+        ),
+        (
+            "log PID 10 out",
+            "log: not available on this port (the hardware or file system is missing)",
+        ),
     ] {
         let err = e.execute(line, &mut hal, &mut out).unwrap_err();
         assert_eq!(err.to_string(), message);
