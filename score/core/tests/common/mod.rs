@@ -4,42 +4,37 @@
 use score_core::hal::*;
 use score_core::{Engine, Num, Outcome};
 
-/// [`DummyHal`]'s peripherals (reading ADC code 0 and high pins unless told otherwise) with
-/// named in-memory playback inputs and logs.
-pub struct MemBoard {
-    pub hw: DummyHal,
+/// [`DummyHal`]'s peripherals beside named in-memory playback inputs and logs.
+pub type MemBoard = Board<DummyHal, MemFiles>;
+
+/// A test board: every ADC conversion reads 0 and every pin reads high (set `hw.adc_code`,
+/// `hw.pin_level` for others), no files yet.
+pub fn board() -> MemBoard {
+    Board::new(
+        DummyHal {
+            adc_code: 0,
+            pin_level: true,
+            ..DummyHal::default()
+        },
+        MemFiles::default(),
+    )
+}
+
+/// `infile` inputs given by the test, `log` outputs kept as lines.
+#[derive(Default)]
+pub struct MemFiles {
     pub inputs: Vec<(String, Vec<f64>)>,
     pub open: Vec<Option<usize>>,
     pub logs: Vec<(String, Vec<String>)>,
     pub log_open: Vec<Option<usize>>,
 }
 
-impl Default for MemBoard {
-    fn default() -> Self {
-        Self {
-            hw: DummyHal {
-                adc_code: 0,
-                pin_level: true,
-                ..DummyHal::default()
-            },
-            inputs: Vec::new(),
-            open: Vec::new(),
-            logs: Vec::new(),
-            log_open: Vec::new(),
-        }
-    }
-}
-
-impl MemBoard {
-    /// Every ADC conversion returns `code`.
-    pub fn with_adc_code(mut self, code: u16) -> Self {
-        self.hw.adc_code = code;
-        self
-    }
-    pub fn with_input(mut self, path: &str, data: Vec<f64>) -> Self {
+impl MemFiles {
+    /// `infile` of `path` will play `data`.
+    pub fn add_input(&mut self, path: &str, data: Vec<f64>) {
         self.inputs.push((path.into(), data));
-        self
     }
+    /// The numbers last logged to `path`.
     pub fn log(&self, path: &str) -> Vec<f64> {
         let (_, lines) = self
             .logs
@@ -51,67 +46,7 @@ impl MemBoard {
     }
 }
 
-impl Adc for MemBoard {
-    fn adc_channels(&self) -> u8 {
-        self.hw.adc_channels()
-    }
-    fn adc_differential_pairs(&self) -> u8 {
-        self.hw.adc_differential_pairs()
-    }
-    fn adc_has_temperature(&self) -> bool {
-        self.hw.adc_has_temperature()
-    }
-    fn adc_full_scale(&self) -> u16 {
-        self.hw.adc_full_scale()
-    }
-    fn adc_reference_volts(&self) -> f32 {
-        self.hw.adc_reference_volts()
-    }
-    fn adc_configure(&mut self, i: AdcInput, rate_hz: f32) -> Result<(), HalError> {
-        self.hw.adc_configure(i, rate_hz)
-    }
-    fn adc_release(&mut self, i: AdcInput) {
-        self.hw.adc_release(i)
-    }
-    fn adc_read(&mut self, i: AdcInput) -> Result<u16, HalError> {
-        self.hw.adc_read(i)
-    }
-}
-
-impl Pwm for MemBoard {
-    fn pwm_outputs(&self) -> u8 {
-        self.hw.pwm_outputs()
-    }
-    fn pwm_configure(&mut self, o: PwmOutput, f: f32) -> Result<f32, HalError> {
-        self.hw.pwm_configure(o, f)
-    }
-    fn pwm_set_duty(&mut self, o: PwmOutput, d: f32) -> f32 {
-        self.hw.pwm_set_duty(o, d)
-    }
-    fn pwm_release(&mut self, o: PwmOutput) {
-        self.hw.pwm_release(o)
-    }
-}
-
-impl Gpio for MemBoard {
-    fn gpio_pins(&self) -> u8 {
-        self.hw.gpio_pins()
-    }
-    fn gpio_configure(&mut self, pin: u8, output: bool) -> Result<(), HalError> {
-        self.hw.gpio_configure(pin, output)
-    }
-    fn gpio_read(&mut self, pin: u8) -> bool {
-        self.hw.gpio_read(pin)
-    }
-    fn gpio_write(&mut self, pin: u8, high: bool) {
-        self.hw.gpio_write(pin, high)
-    }
-    fn gpio_release(&mut self, pin: u8) {
-        self.hw.gpio_release(pin)
-    }
-}
-
-impl DataFiles for MemBoard {
+impl DataFiles for MemFiles {
     fn open_input(&mut self, path: &str) -> Result<StreamId, HalError> {
         let i = self
             .inputs
