@@ -9,96 +9,19 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use score_core::hal::{Adc, AdcInput, DataFiles, Gpio, HalError, Pwm, PwmOutput, StreamId};
-use score_core::{Engine, Real};
+use score_core::hal::PlaybackHal;
+use score_core::{Engine, Real, FIG_5_20_PID};
 
-/// A board with one in-memory playback signal (the PID's error input) and nothing else.
-struct Bench {
-    signal: Vec<f64>,
-}
-
-impl Adc for Bench {
-    fn adc_channels(&self) -> u8 {
-        0
-    }
-    fn adc_differential_pairs(&self) -> u8 {
-        0
-    }
-    fn adc_has_temperature(&self) -> bool {
-        false
-    }
-    fn adc_full_scale(&self) -> u16 {
-        4095
-    }
-    fn adc_reference_volts(&self) -> f32 {
-        3.3
-    }
-    fn adc_configure(&mut self, _: AdcInput, _: f32) -> Result<(), HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-    fn adc_release(&mut self, _: AdcInput) {}
-    fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-}
-impl Pwm for Bench {
-    fn pwm_outputs(&self) -> u8 {
-        0
-    }
-    fn pwm_configure(&mut self, _: PwmOutput, _: f32) -> Result<f32, HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-    fn pwm_set_duty(&mut self, _: PwmOutput, d: f32) -> f32 {
-        d
-    }
-    fn pwm_release(&mut self, _: PwmOutput) {}
-}
-impl Gpio for Bench {
-    fn gpio_pins(&self) -> u8 {
-        0
-    }
-    fn gpio_configure(&mut self, _: u8, _: bool) -> Result<(), HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-    fn gpio_read(&mut self, _: u8) -> bool {
-        false
-    }
-    fn gpio_write(&mut self, _: u8, _: bool) {}
-    fn gpio_release(&mut self, _: u8) {}
-}
-impl DataFiles for Bench {
-    fn open_input(&mut self, _: &str) -> Result<StreamId, HalError> {
-        Ok(StreamId(0))
-    }
-    fn input_len(&self, _: StreamId) -> u32 {
-        self.signal.len() as u32
-    }
-    fn input_sample(&self, _: StreamId, i: u32) -> f64 {
-        self.signal[i as usize]
-    }
-}
-
-/// Fig. 5.20 without its `log` line (the benchmark reads PID itself).
-const FIG_5_20: &str = "var
-defdiff Dsgnl sgnl 1000
-defint Isgnl sgnl 1000
-defexp Iterm Isgnl Ki *
-defexp Dterm Dsgnl Kd *
-defexp Pterm sgnl Kp *
-defexp PID Pterm Iterm + Dterm +
-defexp Kp 21
-defexp Ki 350
-defexp Kd 0.0788
-infile sgnl 1000 mpidin.log";
-
-fn setup<N: Real>() -> (Engine<N>, Bench, score_core::VarId) {
+/// Fig. 5.20 (without its `log` line: the benchmark reads PID itself) on a board with one
+/// in-memory playback signal (the PID's error input) and nothing else.
+fn setup<N: Real>() -> (Engine<N>, PlaybackHal<Vec<f64>>, score_core::VarId) {
     let signal = (0..1500)
         .map(|k| 0.015 * (k as f64 * 0.025).sin())
         .collect();
-    let mut board = Bench { signal };
+    let mut board = PlaybackHal::new(signal);
     let mut e = Engine::<N>::new();
     let mut out = String::new();
-    for line in FIG_5_20.lines() {
+    for line in FIG_5_20_PID.lines() {
         e.execute(line, &mut board, &mut out).expect(line);
     }
     let pid = e.lookup("PID").unwrap();

@@ -251,15 +251,46 @@ impl ChannelRange {
 
 impl fmt::Display for ChannelRange {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // "0-3, A-B or T", or any part of it; "none" for a board without any.
+        let mut any = false;
         if self.singles > 0 {
             write!(f, "0-{}", self.singles - 1)?;
+            any = true;
         }
         if self.pairs > 0 {
-            write!(f, ", A-{}", (b'A' + self.pairs - 1) as char)?;
+            let sep = if any { ", " } else { "" };
+            write!(f, "{sep}A-{}", (b'A' + self.pairs - 1) as char)?;
+            any = true;
         }
         if self.temperature {
-            f.write_str(" or T")?;
+            f.write_str(if any { " or T" } else { "T" })?;
+            any = true;
+        }
+        if !any {
+            f.write_str("none")?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::fmt::Write;
+
+    #[test]
+    fn channel_ranges_list_what_exists() {
+        for (r, text) in [
+            (ChannelRange::new(4, 2, true), "0-3, A-B or T"),
+            (ChannelRange::new(8, 4, false), "0-7, A-D"),
+            (ChannelRange::new(0, 2, true), "A-B or T"),
+            (ChannelRange::new(0, 0, true), "T"),
+            (ChannelRange::new(0, 0, false), "none"),
+        ] {
+            let mut buf = [0u8; 32];
+            let mut w = crate::text::BufWriter::new(&mut buf);
+            write!(w, "{r}").unwrap();
+            assert_eq!(w.as_str(), text);
+        }
     }
 }

@@ -163,13 +163,143 @@ pub trait Serial {
 pub trait Hal: Adc + Pwm + Gpio + DataFiles {}
 impl<T: Adc + Pwm + Gpio + DataFiles> Hal for T {}
 
-/// A board that accepts every configuration and reads mid-scale: for tests, fuzzing and docs.
-/// Four single-ended channels, two differential pairs, a temperature sensor (10-bit, 3.0 V like
-/// the thesis' board), eight PWM outputs, eight pins, no files.
+/// A board put together from two parts: peripherals `P` (its [`Adc`], [`Pwm`] and [`Gpio`]) and
+/// a file store `F` (its [`DataFiles`]), so a port or a test that keeps them apart (simulated
+/// peripherals beside real files, a dummy board beside in-memory files) gets [`Hal`] without
+/// forwarding every method itself.
+///
+/// ```
+/// use score_core::hal::{Board, DummyHal, PlaybackHal};
+/// use score_core::Engine;
+/// // The dummy's ADC (reading code 1023 of 1023 at 3.0 V) beside a played-back signal.
+/// let dummy = DummyHal { adc_code: 1023, ..DummyHal::default() };
+/// let mut hal = Board::new(dummy, PlaybackHal::new([0.25]));
+/// let mut score: Engine<f64> = Engine::new();
+/// let mut out = String::new();
+/// for line in ["adc 0 100", "infile e 100 e.txt", "defexp sum adc0 e +"] {
+///     score.execute(line, &mut hal, &mut out).unwrap();
+/// }
+/// assert_eq!(score.value_of("sum"), Some(3.0 + 0.25));
+/// ```
 #[derive(Debug, Default, Clone, PartialEq)]
+pub struct Board<P, F> {
+    /// ADC, PWM and GPIO.
+    pub hw: P,
+    /// `infile` and `log`.
+    pub files: F,
+}
+
+impl<P, F> Board<P, F> {
+    /// `hw` with `files`.
+    pub const fn new(hw: P, files: F) -> Self {
+        Self { hw, files }
+    }
+}
+
+impl<P: Adc, F> Adc for Board<P, F> {
+    fn adc_channels(&self) -> u8 {
+        self.hw.adc_channels()
+    }
+    fn adc_differential_pairs(&self) -> u8 {
+        self.hw.adc_differential_pairs()
+    }
+    fn adc_has_temperature(&self) -> bool {
+        self.hw.adc_has_temperature()
+    }
+    fn adc_full_scale(&self) -> u16 {
+        self.hw.adc_full_scale()
+    }
+    fn adc_reference_volts(&self) -> f32 {
+        self.hw.adc_reference_volts()
+    }
+    fn adc_configure(&mut self, input: AdcInput, rate_hz: f32) -> Result<(), HalError> {
+        self.hw.adc_configure(input, rate_hz)
+    }
+    fn adc_release(&mut self, input: AdcInput) {
+        self.hw.adc_release(input)
+    }
+    fn adc_read(&mut self, input: AdcInput) -> Result<u16, HalError> {
+        self.hw.adc_read(input)
+    }
+}
+
+impl<P: Pwm, F> Pwm for Board<P, F> {
+    fn pwm_outputs(&self) -> u8 {
+        self.hw.pwm_outputs()
+    }
+    fn pwm_configure(&mut self, out: PwmOutput, freq_hz: f32) -> Result<f32, HalError> {
+        self.hw.pwm_configure(out, freq_hz)
+    }
+    fn pwm_set_duty(&mut self, out: PwmOutput, duty: f32) -> f32 {
+        self.hw.pwm_set_duty(out, duty)
+    }
+    fn pwm_release(&mut self, out: PwmOutput) {
+        self.hw.pwm_release(out)
+    }
+}
+
+impl<P: Gpio, F> Gpio for Board<P, F> {
+    fn gpio_pins(&self) -> u8 {
+        self.hw.gpio_pins()
+    }
+    fn gpio_configure(&mut self, pin: u8, output: bool) -> Result<(), HalError> {
+        self.hw.gpio_configure(pin, output)
+    }
+    fn gpio_read(&mut self, pin: u8) -> bool {
+        self.hw.gpio_read(pin)
+    }
+    fn gpio_write(&mut self, pin: u8, high: bool) {
+        self.hw.gpio_write(pin, high)
+    }
+    fn gpio_release(&mut self, pin: u8) {
+        self.hw.gpio_release(pin)
+    }
+}
+
+impl<P, F: DataFiles> DataFiles for Board<P, F> {
+    fn open_input(&mut self, path: &str) -> Result<StreamId, HalError> {
+        self.files.open_input(path)
+    }
+    fn input_len(&self, id: StreamId) -> u32 {
+        self.files.input_len(id)
+    }
+    fn input_sample(&self, id: StreamId, index: u32) -> f64 {
+        self.files.input_sample(id, index)
+    }
+    fn open_log(&mut self, path: &str) -> Result<StreamId, HalError> {
+        self.files.open_log(path)
+    }
+    fn write_log(&mut self, id: StreamId, text: &str) {
+        self.files.write_log(id, text)
+    }
+    fn close(&mut self, id: StreamId) {
+        self.files.close(id)
+    }
+}
+
+/// A board that accepts every configuration and reads a fixed code: for tests, fuzzing and docs.
+/// Four single-ended channels, two differential pairs, a temperature sensor (10-bit, 3.0 V like
+/// the thesis' board), eight PWM outputs, eight pins, no files. Every ADC read returns
+/// [`adc_code`](Self::adc_code) (mid-scale, 512, by default) and every input pin reads
+/// [`pin_level`](Self::pin_level) (low by default).
+#[derive(Debug, Clone, PartialEq)]
 pub struct DummyHal {
     /// Last duty fraction set per output (single outputs; pairs write their first output).
     pub duty: [f32; 8],
+    /// The code every ADC conversion returns.
+    pub adc_code: u16,
+    /// The level every input pin reads.
+    pub pin_level: bool,
+}
+
+impl Default for DummyHal {
+    fn default() -> Self {
+        Self {
+            duty: [0.0; 8],
+            adc_code: 512,
+            pin_level: false,
+        }
+    }
 }
 
 impl Adc for DummyHal {
@@ -193,7 +323,7 @@ impl Adc for DummyHal {
     }
     fn adc_release(&mut self, _: AdcInput) {}
     fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
-        Ok(512)
+        Ok(self.adc_code)
     }
 }
 
@@ -225,10 +355,115 @@ impl Gpio for DummyHal {
         Ok(())
     }
     fn gpio_read(&mut self, _: u8) -> bool {
-        false
+        self.pin_level
     }
     fn gpio_write(&mut self, _: u8, _: bool) {}
     fn gpio_release(&mut self, _: u8) {}
 }
 
 impl DataFiles for DummyHal {}
+
+/// A board with no peripherals that plays one in-memory signal through `infile`: whatever the
+/// file name, `infile` opens [`signal`](Self::signal) (the engine loops it, one sample per
+/// update). No ADC inputs, PWM outputs or pins (configuring one is refused with
+/// [`HalError::NoSuchChannel`]); `log` is unsupported. For benchmarks and tests of algorithms
+/// fed by a recorded signal, such as the thesis' Fig. 5.20 PID ([`crate::FIG_5_20_PID`]), on the
+/// host and in the firmware alike: `S` is anything that lends a `[f64]` (an array, a slice, a
+/// `Vec`), so no heap is needed.
+///
+/// ```
+/// use score_core::{hal::PlaybackHal, Engine};
+/// let mut hal = PlaybackHal::new([0.5, -0.25]);
+/// let mut score: Engine<f64> = Engine::new();
+/// let mut out = String::new();
+/// score.execute("infile e 1000 any-name", &mut hal, &mut out).unwrap();
+/// let seen: Vec<f64> = (0..4u64)
+///     .map(|k| {
+///         score.tick(k * 1000, &mut hal);
+///         score.value_of("e").unwrap()
+///     })
+///     .collect();
+/// assert_eq!(seen, [0.5, -0.25, 0.5, -0.25]);
+/// assert!(score.execute("adc 0 100", &mut hal, &mut out).is_err());
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlaybackHal<S> {
+    /// The samples `infile` plays, in order.
+    pub signal: S,
+}
+
+impl<S: AsRef<[f64]>> PlaybackHal<S> {
+    /// A board playing `signal`.
+    pub const fn new(signal: S) -> Self {
+        Self { signal }
+    }
+}
+
+/// No inputs; the converter's scale is a nominal 12-bit, 3.3 V one.
+impl<S> Adc for PlaybackHal<S> {
+    fn adc_channels(&self) -> u8 {
+        0
+    }
+    fn adc_differential_pairs(&self) -> u8 {
+        0
+    }
+    fn adc_has_temperature(&self) -> bool {
+        false
+    }
+    fn adc_full_scale(&self) -> u16 {
+        4095
+    }
+    fn adc_reference_volts(&self) -> f32 {
+        3.3
+    }
+    fn adc_configure(&mut self, _: AdcInput, _: f32) -> Result<(), HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+    fn adc_release(&mut self, _: AdcInput) {}
+    fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+}
+
+impl<S> Pwm for PlaybackHal<S> {
+    fn pwm_outputs(&self) -> u8 {
+        0
+    }
+    fn pwm_configure(&mut self, _: PwmOutput, _: f32) -> Result<f32, HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+    fn pwm_set_duty(&mut self, _: PwmOutput, duty: f32) -> f32 {
+        duty
+    }
+    fn pwm_release(&mut self, _: PwmOutput) {}
+}
+
+impl<S> Gpio for PlaybackHal<S> {
+    fn gpio_pins(&self) -> u8 {
+        0
+    }
+    fn gpio_configure(&mut self, _: u8, _: bool) -> Result<(), HalError> {
+        Err(HalError::NoSuchChannel)
+    }
+    fn gpio_read(&mut self, _: u8) -> bool {
+        false
+    }
+    fn gpio_write(&mut self, _: u8, _: bool) {}
+    fn gpio_release(&mut self, _: u8) {}
+}
+
+impl<S: AsRef<[f64]>> DataFiles for PlaybackHal<S> {
+    fn open_input(&mut self, _path: &str) -> Result<StreamId, HalError> {
+        Ok(StreamId(0))
+    }
+    fn input_len(&self, _: StreamId) -> u32 {
+        self.signal.as_ref().len().min(u32::MAX as usize) as u32
+    }
+    fn input_sample(&self, _: StreamId, index: u32) -> f64 {
+        self.signal
+            .as_ref()
+            .get(index as usize)
+            .copied()
+            .unwrap_or(0.0)
+    }
+}

@@ -64,6 +64,23 @@ pub const ENGINE_BYTES: usize = core::mem::size_of::<Engine<Num>>();
 /// The terminal prompt of the thesis.
 pub const PROMPT: &str = "$> ";
 
+/// The thesis' Fig. 5.20 PID script (`∗` typed as `*`) without its closing `log` line: the
+/// workload of the host and firmware benchmarks, which read `PID` themselves. `sgnl` plays
+/// `mpidin.log` at 1 kHz (any signal on [`hal::PlaybackHal`]); `PID` is `Kp sgnl + Ki ∫sgnl +
+/// Kd d(sgnl)/dt` with the gains defined after their use. The thesis file itself is
+/// `score/host/tests/thesis/fig5_20.score`, and a test there checks that this is it.
+pub const FIG_5_20_PID: &str = "var
+defdiff Dsgnl sgnl 1000
+defint Isgnl sgnl 1000
+defexp Iterm Isgnl Ki *
+defexp Dterm Dsgnl Kd *
+defexp Pterm sgnl Kp *
+defexp PID Pterm Iterm + Dterm +
+defexp Kp 21
+defexp Ki 350
+defexp Kd 0.0788
+infile sgnl 1000 mpidin.log";
+
 /// Prints the start-up banner (thesis Fig. 5.1, with this program's name and version).
 pub fn write_banner(out: &mut dyn core::fmt::Write) -> core::fmt::Result {
     writeln!(out, "Welcome to Score (v{})", env!("CARGO_PKG_VERSION"))?;

@@ -2,7 +2,7 @@
 //! menu, the expression arena, the schedule) exactly as it was.
 mod common;
 
-use common::{run, MemBoard};
+use common::{board, run};
 use score_core::{Engine, Num};
 
 const SETUP: &str = "adc 0 100\nadc A 1000\npwm 4 1000 50\nvar\ndefexp Kp 21\ndefexp a b 1 +\n\
@@ -60,7 +60,8 @@ const CORPUS: &[(&str, &str)] = &[
 fn every_bad_line_is_refused_with_its_message_and_changes_nothing() {
     assert!(CORPUS.len() >= 20);
     let mut e: Engine<Num> = Engine::new();
-    let mut b = MemBoard::default().with_input("sin.txt", vec![0.0, 0.5, 1.0]);
+    let mut b = board();
+    b.files.add_input("sin.txt", vec![0.0, 0.5, 1.0]);
     run(&mut e, &mut b, SETUP);
     let mut saved = String::new();
     e.save(&mut saved).unwrap();
@@ -80,7 +81,7 @@ fn every_bad_line_is_refused_with_its_message_and_changes_nothing() {
 #[test]
 fn command_prints_the_error_line() {
     let mut e: Engine<Num> = Engine::new();
-    let mut b = MemBoard::default();
+    let mut b = board();
     let mut out = String::new();
     assert!(e.command("adc 0", &mut b, &mut out).is_err());
     assert_eq!(
@@ -92,7 +93,7 @@ fn command_prints_the_error_line() {
 #[test]
 fn full_table_is_refused_without_partial_changes() {
     let mut e: Engine<Num> = Engine::new();
-    let mut b = MemBoard::default();
+    let mut b = board();
     for i in 0..score_core::capacity::MAX_SYMBOLS - 1 {
         run(&mut e, &mut b, &format!("defexp c{i} {i}"));
     }

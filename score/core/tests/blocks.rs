@@ -2,7 +2,7 @@
 //! static placement the firmware needs.
 mod common;
 
-use common::{run, run_until, MemBoard};
+use common::{board, run, run_until};
 use score_core::{Engine, Num, Real, VarKind};
 
 // A firmware keeps the engine in a static: `new` must be usable in a const context.
@@ -17,14 +17,15 @@ fn lpf_follows_its_discrete_recurrence() {
     let mut e: Engine<Num> = Engine::new();
     let mut data = vec![0.0; 10];
     data.extend(vec![1.0; 90]);
-    let mut b = MemBoard::default().with_input("step", data);
+    let mut b = board();
+    b.files.add_input("step", data);
     run(
         &mut e,
         &mut b,
         "infile x 100 step\ndeflpf y x 100 2\nlog y 100 y.log",
     );
     run_until(&mut e, &mut b, 1_000_000);
-    let y = b.log("y.log");
+    let y = b.files.log("y.log");
     assert_eq!(y.len(), 100);
     // y_k = y_{k-1} + a (x_k - y_{k-1}), a = dt / (tau + dt), tau = 1/(2 pi fc): after the step at
     // k = 10, y_k = 1 - (1 - a)^(k - 9). Rounding: a few operations per step on values <= 1.
@@ -49,7 +50,8 @@ fn pid_with_limits_does_not_wind_up() {
     let mut e: Engine<Num> = Engine::new();
     let mut data = vec![1.0; 100];
     data.extend(vec![-1.0; 100]);
-    let mut b = MemBoard::default().with_input("err", data);
+    let mut b = board();
+    b.files.add_input("err", data);
     run(
         &mut e,
         &mut b,
@@ -57,7 +59,7 @@ fn pid_with_limits_does_not_wind_up() {
          log held 100 held.log\nlog free 100 free.log",
     );
     run_until(&mut e, &mut b, 2_000_000);
-    let (held, free) = (b.log("held.log"), b.log("free.log"));
+    let (held, free) = (b.files.log("held.log"), b.files.log("free.log"));
     // ki = 1, e = +1 for 1 s: the free integral reaches 0.99 at k = 99; the limited one stops
     // exactly at the limit 0.5 (k = 50) and holds. After the sign change (k = 100) the trapezoid's first step
     // averages +1 and -1, so the limited output leaves 0.5 at k = 101; the free one only when
@@ -73,10 +75,8 @@ fn pid_with_limits_does_not_wind_up() {
 #[test]
 fn gpio_and_temperature_channels() {
     let mut e: Engine<Num> = Engine::new();
-    let mut b = MemBoard {
-        adc_code: 200,
-        ..Default::default()
-    };
+    let mut b = board();
+    b.hw.adc_code = 200;
     run(
         &mut e,
         &mut b,
@@ -105,7 +105,7 @@ fn gpio_and_temperature_channels() {
 #[test]
 fn variables_defined_later_start_at_the_time_they_are_typed() {
     let mut e: Engine<Num> = Engine::new();
-    let mut b = MemBoard::default();
+    let mut b = board();
     run(&mut e, &mut b, "defexp one 1\ndefint A one 1000");
     run_until(&mut e, &mut b, 500);
     e.set_time(500);

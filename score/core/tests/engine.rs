@@ -1,17 +1,13 @@
 //! Behaviour of the command language and the scheduler.
 mod common;
 
-use common::{run, run_until, MemBoard};
+use common::{board, run, run_until, MemBoard};
 use score_core::{Engine, Error, Num, VarKind};
 
 fn engine() -> (Engine<Num>, MemBoard) {
-    (
-        Engine::new(),
-        MemBoard {
-            adc_code: 330,
-            ..Default::default()
-        },
-    )
+    let mut b = board();
+    b.hw.adc_code = 330;
+    (Engine::new(), b)
 }
 
 #[test]
@@ -120,7 +116,7 @@ fn set_changes_constants_and_refuses_computed_values() {
 fn scheduler_runs_higher_rates_first_and_producers_first_at_equal_rates() {
     let (mut e, mut b) = engine();
     // The log is defined before its source, and at a lower rate than the integrator.
-    b = b.with_input("in", vec![1.0, 2.0, 3.0, 4.0]);
+    b.files.add_input("in", vec![1.0, 2.0, 3.0, 4.0]);
     run(
         &mut e,
         &mut b,
@@ -129,17 +125,17 @@ fn scheduler_runs_higher_rates_first_and_producers_first_at_equal_rates() {
     run_until(&mut e, &mut b, 4_000);
     // x: 1,2,3,4 at t = 0..3 ms; I(0)=0, I(1ms)=1.5e-3, I(2)=4e-3, I(3)=7.5e-3; logged at 0, 2 ms
     // after the 1 kHz updates of the same instant.
-    assert_eq!(b.log("out"), [0.0, 0.004]);
+    assert_eq!(b.files.log("out"), [0.0, 0.004]);
 }
 
 #[test]
 fn playback_loops_and_rates_do_not_drift() {
     let (mut e, mut b) = engine();
-    b = b.with_input("in", vec![1.0, 2.0, 3.0]);
+    b.files.add_input("in", vec![1.0, 2.0, 3.0]);
     run(&mut e, &mut b, "infile x 3 in\nlog x 3 out");
     run_until(&mut e, &mut b, 10_000_000);
     // 3 Hz for 10 s = 30 updates exactly (a rounded 333333 us period would drift).
-    let log = b.log("out");
+    let log = b.files.log("out");
     assert_eq!(log.len(), 30);
     assert_eq!(&log[..7], [1.0, 2.0, 3.0, 1.0, 2.0, 3.0, 1.0]);
 }
@@ -147,7 +143,7 @@ fn playback_loops_and_rates_do_not_drift() {
 #[test]
 fn late_ticks_skip_and_count_instead_of_bursting() {
     let (mut e, mut b) = engine();
-    b = b.with_input("in", vec![0.0; 10]);
+    b.files.add_input("in", vec![0.0; 10]);
     run(&mut e, &mut b, "defint I one 100\ndefexp one 1");
     assert_eq!(e.tick(0, &mut b), 1);
     assert_eq!(e.tick(55_000, &mut b), 1, "one update, not five");
@@ -192,7 +188,7 @@ del D",
 #[test]
 fn save_writes_a_script_that_recreates_the_table() {
     let (mut e, mut b) = engine();
-    b = b.with_input("sig.txt", vec![0.5]);
+    b.files.add_input("sig.txt", vec![0.5]);
     let script = "adc 1 5000\npwm A 250 25\nvar\ndefexp Kp 21\ndefdiff D adc1 500\ndefexp P adc1 Kp * D +\n\
                   defscale S P -1.5 1.5 0 100\ndefsat T S 10 90\ndefwind W adc1 100 1 P T\n\
                   defpid C adc1 1000 Kp 350 0.0788 -1 1\ndeflpf F adc1 100 5\ndefpwm pw2 T 100 2 1000\n\
@@ -201,7 +197,7 @@ fn save_writes_a_script_that_recreates_the_table() {
     let mut saved = String::new();
     e.save(&mut saved).unwrap();
     let (mut e2, mut b2) = engine();
-    b2 = b2.with_input("sig.txt", vec![0.5]);
+    b2.files.add_input("sig.txt", vec![0.5]);
     let body: String = saved
         .lines()
         .filter(|l| !l.starts_with('#'))
@@ -340,4 +336,50 @@ fn last_update_reports_the_scheduled_instant_of_the_latest_update() {
         None,
         "bare expressions have no schedule"
     );
+}
+
+#[test]
+fn playback_board_plays_its_signal_for_fig_5_20_and_has_no_peripherals() {
+    use score_core::hal::PlaybackHal;
+    let signal = [0.0, 0.01, -0.02, 0.03];
+    let mut hal = PlaybackHal::new(signal);
+    let mut e: Engine<Num> = Engine::new();
+    let mut out = String::new();
+    for line in score_core::FIG_5_20_PID.lines() {
+        e.execute(line, &mut hal, &mut out).expect(line);
+    }
+    // One sample per 1 kHz update, looping; the first is read when `infile` is typed.
+    for k in 0..10u64 {
+        e.tick(k * 1000, &mut hal);
+        assert_eq!(
+            e.value_of("sgnl"),
+            Some(signal[k as usize % 4] as Num),
+            "update {k}"
+        );
+    }
+    for (line, message) in [
+        (
+            "adc 0 100",
+            "adc: '0' is not an ADC channel of this board (expected none)",
+        ),
+        (
+            "adc T 100",
+            "adc: 'T' is not an ADC channel of this board (expected none)",
+        ),
+        (
+            "pwm 0 1000 50",
+            "pwm: '0' is not a PWM output of this board (expected none)",
+        ),
+        (
+            "gpio 0 10",
+            "gpio: '0' is not a GPIO pin number of this board",
+        ),
+        (
+            "log PID 10 out",
+            "log: not available on this port (the hardware or file system is missing)",
+        ),
+    ] {
+        let err = e.execute(line, &mut hal, &mut out).unwrap_err();
+        assert_eq!(err.to_string(), message);
+    }
 }

@@ -3,7 +3,7 @@
 //! in score/core/fuzz covers arbitrary bytes).
 mod common;
 
-use common::MemBoard;
+use common::board;
 use proptest::prelude::*;
 use score_core::{Engine, Num};
 
@@ -85,7 +85,8 @@ proptest! {
     #[test]
     fn lines_never_panic_and_failures_change_nothing(lines in prop::collection::vec(line(), 1..24)) {
         let mut e: Engine<Num> = Engine::new();
-        let mut b = MemBoard::default().with_input("in.txt", vec![1.0, -1.0]);
+        let mut b = board();
+        b.files.add_input("in.txt", vec![1.0, -1.0]);
         let mut t = 0u64;
         for l in &lines {
             let before = e.clone();

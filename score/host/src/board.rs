@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-use score_core::hal::{Adc, AdcInput, DataFiles, Gpio, HalError, Pwm, PwmOutput, StreamId};
+use score_core::hal::{Adc, AdcInput, Board, DataFiles, Gpio, HalError, Pwm, PwmOutput, StreamId};
 
 /// Number of simulated single-ended ADC channels (thesis: 0-3).
 pub const ADC_CHANNELS: u8 = 4;
@@ -348,115 +348,23 @@ impl DataFiles for Files {
     }
 }
 
-/// The host's board: simulated peripherals plus files.
-pub struct SimBoard {
-    /// ADC, PWM, GPIO.
-    pub hw: SimHw,
-    /// infile/log.
-    pub files: Files,
-}
-
-impl SimBoard {
-    /// A board whose files are relative to `base`.
-    pub fn new(base: impl Into<PathBuf>) -> Self {
-        Self {
-            hw: SimHw::default(),
-            files: Files::new(base),
-        }
-    }
-
-    /// A copy for dry runs: same peripherals, files only checked.
-    pub fn dry_run(&self) -> Self {
-        Self {
-            hw: self.hw.clone(),
-            files: self.files.dry_run(),
-        }
-    }
-}
-
-impl Adc for SimBoard {
-    fn adc_channels(&self) -> u8 {
-        self.hw.adc_channels()
-    }
-    fn adc_differential_pairs(&self) -> u8 {
-        self.hw.adc_differential_pairs()
-    }
-    fn adc_has_temperature(&self) -> bool {
-        self.hw.adc_has_temperature()
-    }
-    fn adc_full_scale(&self) -> u16 {
-        self.hw.adc_full_scale()
-    }
-    fn adc_reference_volts(&self) -> f32 {
-        self.hw.adc_reference_volts()
-    }
-    fn adc_configure(&mut self, input: AdcInput, rate_hz: f32) -> Result<(), HalError> {
-        self.hw.adc_configure(input, rate_hz)
-    }
-    fn adc_release(&mut self, input: AdcInput) {
-        self.hw.adc_release(input)
-    }
-    fn adc_read(&mut self, input: AdcInput) -> Result<u16, HalError> {
-        self.hw.adc_read(input)
-    }
-}
-
-impl Pwm for SimBoard {
-    fn pwm_outputs(&self) -> u8 {
-        self.hw.pwm_outputs()
-    }
-    fn pwm_configure(&mut self, out: PwmOutput, freq_hz: f32) -> Result<f32, HalError> {
-        self.hw.pwm_configure(out, freq_hz)
-    }
-    fn pwm_set_duty(&mut self, out: PwmOutput, duty: f32) -> f32 {
-        self.hw.pwm_set_duty(out, duty)
-    }
-    fn pwm_release(&mut self, out: PwmOutput) {
-        self.hw.pwm_release(out)
-    }
-}
-
-impl Gpio for SimBoard {
-    fn gpio_pins(&self) -> u8 {
-        self.hw.gpio_pins()
-    }
-    fn gpio_configure(&mut self, pin: u8, output: bool) -> Result<(), HalError> {
-        self.hw.gpio_configure(pin, output)
-    }
-    fn gpio_read(&mut self, pin: u8) -> bool {
-        self.hw.gpio_read(pin)
-    }
-    fn gpio_write(&mut self, pin: u8, high: bool) {
-        self.hw.gpio_write(pin, high)
-    }
-    fn gpio_release(&mut self, pin: u8) {
-        self.hw.gpio_release(pin)
-    }
-}
-
-impl DataFiles for SimBoard {
-    fn open_input(&mut self, path: &str) -> Result<StreamId, HalError> {
-        self.files.open_input(path)
-    }
-    fn input_len(&self, id: StreamId) -> u32 {
-        self.files.input_len(id)
-    }
-    fn input_sample(&self, id: StreamId, index: u32) -> f64 {
-        self.files.input_sample(id, index)
-    }
-    fn open_log(&mut self, path: &str) -> Result<StreamId, HalError> {
-        self.files.open_log(path)
-    }
-    fn write_log(&mut self, id: StreamId, text: &str) {
-        self.files.write_log(id, text)
-    }
-    fn close(&mut self, id: StreamId) {
-        self.files.close(id)
-    }
-}
-
-impl Drop for SimBoard {
+/// Logs are flushed when the files go (with the session), as on `close`.
+impl Drop for Files {
     fn drop(&mut self) {
-        self.files.flush();
+        self.flush();
     }
+}
+
+/// The host's board: simulated peripherals ([`SimHw`], the `hw` field) beside real files
+/// ([`Files`], the `files` field).
+pub type SimBoard = Board<SimHw, Files>;
+
+/// A board with the default simulated peripherals whose files are relative to `base`.
+pub fn sim_board(base: impl Into<PathBuf>) -> SimBoard {
+    Board::new(SimHw::default(), Files::new(base))
+}
+
+/// A copy of `board` for dry runs: the same peripherals, files only checked.
+pub fn dry_run(board: &SimBoard) -> SimBoard {
+    Board::new(board.hw.clone(), board.files.dry_run())
 }

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use score_core::hal::AdcInput;
 use score_core::{Engine, Num, Outcome};
 
-use crate::board::SimBoard;
+use crate::board::{self, SimBoard};
 
 /// How time passes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,7 +74,7 @@ impl Session {
     pub fn new(mode: TimeMode, base: impl Into<PathBuf>) -> Self {
         Self {
             engine: Engine::new(),
-            board: SimBoard::new(base),
+            board: board::sim_board(base),
             mode,
             start: Instant::now(),
             sim_now: 0,
@@ -215,7 +215,7 @@ impl Session {
     pub fn load(&mut self, path: &str, out: &mut String) -> Result<(), SessionError> {
         let text = self.read_script(path)?;
         let mut dry: Engine<Num> = Engine::new();
-        let mut board = self.board.dry_run();
+        let mut board = board::dry_run(&self.board);
         let mut sink = String::new();
         for (n, l) in text.lines().enumerate() {
             let fail = |e: SessionError| {

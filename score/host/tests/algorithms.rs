@@ -224,3 +224,19 @@ fn fig5_20_pid_matches_an_independent_discrete_pid() {
         <score_core::Num as score_core::Real>::NAME
     );
 }
+
+#[test]
+fn the_benchmark_script_is_fig5_20_without_its_log_line() {
+    // score_core::FIG_5_20_PID is what the host and firmware benchmarks time: it must be the
+    // thesis' script line for line (with `∗` typed as `*`), less the `log` line at its end.
+    let thesis = std::fs::read_to_string(common::thesis_dir().join("fig5_20.score")).unwrap();
+    let thesis: Vec<String> = thesis
+        .lines()
+        .map(|l| l.trim().replace('\u{2217}', "*"))
+        .filter(|l| !l.is_empty())
+        .collect();
+    let (last, body) = thesis.split_last().unwrap();
+    assert!(last.starts_with("log "), "{last}");
+    let ours: Vec<&str> = score_core::FIG_5_20_PID.lines().collect();
+    assert_eq!(ours, *body);
+}

@@ -8,51 +8,7 @@ mod common;
 use std::collections::BTreeMap;
 
 use score_host::{Session, TimeMode};
-
-fn normalize(s: &str) -> String {
-    s.replace('\u{2212}', "-")
-        .replace(['\u{2019}', '\u{2018}'], "'")
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-/// `NAME - 1.234567` (six decimals, as printvars writes).
-fn var_line(s: &str) -> Option<(String, f64)> {
-    let (name, value) = s.split_once(" - ")?;
-    let (_, decimals) = value.split_once('.')?;
-    (decimals.len() == 6 && !name.contains(' ')).then_some(())?;
-    Some((name.to_string(), value.parse().ok()?))
-}
-
-struct Step {
-    command: String,
-    expected: Vec<String>,
-}
-
-fn parse(text: &str) -> (Vec<String>, Vec<Step>) {
-    let mut banner = Vec::new();
-    let mut steps: Vec<Step> = Vec::new();
-    for raw in text.lines() {
-        let line = normalize(raw);
-        if let Some(cmd) = line.strip_prefix("$>") {
-            steps.push(Step {
-                command: cmd.trim().to_string(),
-                expected: Vec::new(),
-            });
-        } else if line.is_empty() {
-            continue;
-        } else if let Some(step) = steps.last_mut() {
-            // "(Image A)": the author's note about a scope picture, not output.
-            if !(line.starts_with('(') && line.ends_with(')')) {
-                step.expected.push(line);
-            }
-        } else {
-            banner.push(line);
-        }
-    }
-    (banner, steps)
-}
+use score_transcript::Transcript;
 
 type Check = fn(&BTreeMap<String, f64>);
 
@@ -77,68 +33,26 @@ fn close_duty(duty: f64, source: f64, what: &str) {
     );
 }
 
+/// Types the transcript into a fresh session (score_transcript checks the output's structure)
+/// and hands every variable listing to `check`.
 fn run_transcript(file: &str, check: Check) {
-    let text = std::fs::read_to_string(common::thesis_dir().join(file)).unwrap();
-    let (banner, steps) = parse(&text);
-    let mut ours = String::new();
-    score_core::write_banner(&mut ours).unwrap();
-    let ours: Vec<String> = ours.lines().map(normalize).collect();
-    for line in banner
-        .iter()
-        .filter(|l| !l.contains("SEEPS") && !l.contains("Sherbert"))
-    {
-        assert!(
-            ours.contains(line),
-            "{file}: banner line {line:?} missing from {ours:?}"
-        );
-    }
+    let transcript = Transcript::load(file).unwrap();
+    let mut banner = String::new();
+    score_core::write_banner(&mut banner).unwrap();
     let mut session = Session::new(TimeMode::Simulated, common::workdir(file));
-    assert!(!steps.is_empty());
-    for step in &steps {
-        let mut out = String::new();
-        session
-            .line(&step.command, &mut out)
-            .unwrap_or_else(|e| panic!("{file}: {}: {e}", step.command));
-        let actual: Vec<String> = out
-            .lines()
-            .map(normalize)
-            .filter(|l| !l.is_empty())
-            .collect();
-        let expected_vars: Vec<(String, f64)> =
-            step.expected.iter().filter_map(|l| var_line(l)).collect();
-        if !expected_vars.is_empty() && expected_vars.len() == step.expected.len() {
-            // A printvars listing: exactly the same variables in the same order.
-            let got: Vec<(String, f64)> = actual.iter().filter_map(|l| var_line(l)).collect();
-            let names = |v: &[(String, f64)]| v.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
-            assert_eq!(
-                names(&got),
-                names(&expected_vars),
-                "{file}: {}",
-                step.command
-            );
-            assert_eq!(
-                got.len(),
-                actual.len(),
-                "{file}: only variable lines expected: {actual:?}"
-            );
-            check(&got.into_iter().collect());
-        } else {
-            // Other output: every expected line, in order (extra lines such as our longer menus
-            // are allowed).
-            let mut at = 0;
-            for e in &step.expected {
-                let found = actual[at..].iter().position(|a| a == e);
-                let Some(i) = found else {
-                    panic!(
-                        "{file}: after {:?} expected {e:?} in {actual:?}",
-                        step.command
-                    )
-                };
-                at += i + 1;
-            }
-        }
-        // A person types: let simulated time pass between lines so the variables update.
-        session.advance(0.25);
+    let listings = transcript
+        .check(&banner, |command| {
+            let mut out = String::new();
+            session
+                .line(command, &mut out)
+                .unwrap_or_else(|e| panic!("{file}: {command}: {e}"));
+            // A person types: let simulated time pass between lines so the variables update.
+            session.advance(0.25);
+            out
+        })
+        .unwrap_or_else(|m| panic!("{m}"));
+    for listing in listings {
+        check(&listing.into_iter().collect());
     }
 }
 

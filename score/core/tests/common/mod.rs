@@ -1,24 +1,40 @@
-//! Test board: the dummy HAL plus in-memory playback and log files.
+//! Test board: the dummy HAL's peripherals plus in-memory playback and log files.
 #![allow(dead_code)]
 
 use score_core::hal::*;
 use score_core::{Engine, Num, Outcome};
 
+/// [`DummyHal`]'s peripherals beside named in-memory playback inputs and logs.
+pub type MemBoard = Board<DummyHal, MemFiles>;
+
+/// A test board: every ADC conversion reads 0 and every pin reads high (set `hw.adc_code`,
+/// `hw.pin_level` for others), no files yet.
+pub fn board() -> MemBoard {
+    Board::new(
+        DummyHal {
+            adc_code: 0,
+            pin_level: true,
+            ..DummyHal::default()
+        },
+        MemFiles::default(),
+    )
+}
+
+/// `infile` inputs given by the test, `log` outputs kept as lines.
 #[derive(Default)]
-pub struct MemBoard {
-    pub hw: DummyHal,
+pub struct MemFiles {
     pub inputs: Vec<(String, Vec<f64>)>,
     pub open: Vec<Option<usize>>,
     pub logs: Vec<(String, Vec<String>)>,
     pub log_open: Vec<Option<usize>>,
-    pub adc_code: u16,
 }
 
-impl MemBoard {
-    pub fn with_input(mut self, path: &str, data: Vec<f64>) -> Self {
+impl MemFiles {
+    /// `infile` of `path` will play `data`.
+    pub fn add_input(&mut self, path: &str, data: Vec<f64>) {
         self.inputs.push((path.into(), data));
-        self
     }
+    /// The numbers last logged to `path`.
     pub fn log(&self, path: &str) -> Vec<f64> {
         let (_, lines) = self
             .logs
@@ -30,59 +46,7 @@ impl MemBoard {
     }
 }
 
-impl Adc for MemBoard {
-    fn adc_channels(&self) -> u8 {
-        4
-    }
-    fn adc_differential_pairs(&self) -> u8 {
-        2
-    }
-    fn adc_has_temperature(&self) -> bool {
-        true
-    }
-    fn adc_full_scale(&self) -> u16 {
-        1023
-    }
-    fn adc_reference_volts(&self) -> f32 {
-        3.0
-    }
-    fn adc_configure(&mut self, _: AdcInput, _: f32) -> Result<(), HalError> {
-        Ok(())
-    }
-    fn adc_release(&mut self, _: AdcInput) {}
-    fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
-        Ok(self.adc_code)
-    }
-}
-
-impl Pwm for MemBoard {
-    fn pwm_outputs(&self) -> u8 {
-        8
-    }
-    fn pwm_configure(&mut self, o: PwmOutput, f: f32) -> Result<f32, HalError> {
-        self.hw.pwm_configure(o, f)
-    }
-    fn pwm_set_duty(&mut self, o: PwmOutput, d: f32) -> f32 {
-        self.hw.pwm_set_duty(o, d)
-    }
-    fn pwm_release(&mut self, _: PwmOutput) {}
-}
-
-impl Gpio for MemBoard {
-    fn gpio_pins(&self) -> u8 {
-        8
-    }
-    fn gpio_configure(&mut self, _: u8, _: bool) -> Result<(), HalError> {
-        Ok(())
-    }
-    fn gpio_read(&mut self, _: u8) -> bool {
-        true
-    }
-    fn gpio_write(&mut self, _: u8, _: bool) {}
-    fn gpio_release(&mut self, _: u8) {}
-}
-
-impl DataFiles for MemBoard {
+impl DataFiles for MemFiles {
     fn open_input(&mut self, path: &str) -> Result<StreamId, HalError> {
         let i = self
             .inputs

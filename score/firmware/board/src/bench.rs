@@ -4,96 +4,15 @@
 //! One update is what the 1 kHz scheduler does per sample: the playback source (`infile`),
 //! the derivative and the integral (`tick`), then reading the lazy `PID`, which evaluates
 //! Pterm, Iterm, Dterm and their sum. The playback signal is a 256-sample table (0.015 sin
-//! 0.025k, the host benchmark's signal) computed before timing starts.
+//! 0.025k, the host benchmark's signal) computed before timing starts, played by score-core's
+//! [`PlaybackHal`]; the script is [`FIG_5_20_PID`], the one the host benchmark runs.
 
-use score_core::hal::{Adc, AdcInput, DataFiles, Gpio, HalError, Pwm, PwmOutput, StreamId};
-use score_core::{Engine, Real};
+use score_core::hal::PlaybackHal;
+use score_core::{Engine, Real, FIG_5_20_PID};
 
-/// Fig. 5.20 as the firmware runs it (no `log`: the benchmark reads `PID` itself).
-pub const FIG_5_20: [&str; 11] = [
-    "var",
-    "defdiff Dsgnl sgnl 1000",
-    "defint Isgnl sgnl 1000",
-    "defexp Iterm Isgnl Ki *",
-    "defexp Dterm Dsgnl Kd *",
-    "defexp Pterm sgnl Kp *",
-    "defexp PID Pterm Iterm + Dterm +",
-    "defexp Kp 21",
-    "defexp Ki 350",
-    "defexp Kd 0.0788",
-    "infile sgnl 1000 signal",
-];
-
+/// Samples in the playback signal (2 KiB of f64 on the stack while the bench runs; the engine
+/// loops it).
 const SIGNAL: usize = 256;
-
-/// A board with one in-memory playback signal and nothing else.
-struct BenchHal {
-    signal: [f64; SIGNAL],
-}
-
-impl Adc for BenchHal {
-    fn adc_channels(&self) -> u8 {
-        0
-    }
-    fn adc_differential_pairs(&self) -> u8 {
-        0
-    }
-    fn adc_has_temperature(&self) -> bool {
-        false
-    }
-    fn adc_full_scale(&self) -> u16 {
-        4095
-    }
-    fn adc_reference_volts(&self) -> f32 {
-        3.3
-    }
-    fn adc_configure(&mut self, _: AdcInput, _: f32) -> Result<(), HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-    fn adc_release(&mut self, _: AdcInput) {}
-    fn adc_read(&mut self, _: AdcInput) -> Result<u16, HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-}
-
-impl Pwm for BenchHal {
-    fn pwm_outputs(&self) -> u8 {
-        0
-    }
-    fn pwm_configure(&mut self, _: PwmOutput, _: f32) -> Result<f32, HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-    fn pwm_set_duty(&mut self, _: PwmOutput, d: f32) -> f32 {
-        d
-    }
-    fn pwm_release(&mut self, _: PwmOutput) {}
-}
-
-impl Gpio for BenchHal {
-    fn gpio_pins(&self) -> u8 {
-        0
-    }
-    fn gpio_configure(&mut self, _: u8, _: bool) -> Result<(), HalError> {
-        Err(HalError::NoSuchChannel)
-    }
-    fn gpio_read(&mut self, _: u8) -> bool {
-        false
-    }
-    fn gpio_write(&mut self, _: u8, _: bool) {}
-    fn gpio_release(&mut self, _: u8) {}
-}
-
-impl DataFiles for BenchHal {
-    fn open_input(&mut self, _: &str) -> Result<StreamId, HalError> {
-        Ok(StreamId(0))
-    }
-    fn input_len(&self, _: StreamId) -> u32 {
-        SIGNAL as u32
-    }
-    fn input_sample(&self, _: StreamId, i: u32) -> f64 {
-        self.signal[i as usize % SIGNAL]
-    }
-}
 
 /// Cycle counts of the timed updates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -126,15 +45,13 @@ pub fn pid_cycles<N: Real>(
     mask: u32,
     counter: &mut dyn FnMut() -> u32,
 ) -> Result<BenchStats, score_core::Error> {
-    let mut hal = BenchHal {
-        signal: [0.0; SIGNAL],
-    };
+    let mut hal = PlaybackHal::new([0.0; SIGNAL]);
     for (k, s) in hal.signal.iter_mut().enumerate() {
         *s = 0.015 * (N::from_f64(k as f64 * 0.025)).sin().to_f64();
     }
     let mut engine: Engine<N> = Engine::new();
     let mut sink = crate::out::TextOut::<256>::new(false);
-    for line in FIG_5_20 {
+    for line in FIG_5_20_PID.lines() {
         engine.execute(line, &mut hal, &mut sink)?;
     }
     let pid = engine.lookup("PID").ok_or(score_core::Error::Unsupported {

@@ -5,11 +5,12 @@
 //! Needs the firmware ELF (`score-fw build`) and the harness (`npm ci` in
 //! score/firmware/emulator); a test fails with a message saying how to get them.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use score_firmware_tools::emulator::Emulator;
 use score_firmware_tools::port::Port;
+use score_transcript::{normalize, Listing, Transcript};
 
 const PROMPT: &str = "$> ";
 const WAIT: Duration = Duration::from_secs(20);
@@ -45,117 +46,20 @@ fn type_line(t: &mut Port, line: &str) -> Vec<String> {
     lines
 }
 
-fn normalize(s: &str) -> String {
-    s.replace('\u{2212}', "-")
-        .replace(['\u{2019}', '\u{2018}'], "'")
-        .split_whitespace()
-        .collect::<Vec<_>>()
-        .join(" ")
-}
-
-fn thesis(file: &str) -> String {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../host/tests/thesis")
-        .join(file);
-    std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
-/// `NAME - 1.234567` (six decimals, as printvars writes).
-fn var_line(s: &str) -> Option<(String, f64)> {
-    let (name, value) = s.split_once(" - ")?;
-    let (_, decimals) = value.split_once('.')?;
-    (decimals.len() == 6 && !name.contains(' ')).then_some(())?;
-    Some((name.to_string(), value.parse().ok()?))
-}
-
-struct Step {
-    command: String,
-    expected: Vec<String>,
-}
-
-/// The transcript's banner lines and its steps (a `$>` line and the output printed under it;
-/// the author's notes in parentheses on their own line are not output).
-fn parse(text: &str) -> (Vec<String>, Vec<Step>) {
-    let mut banner = Vec::new();
-    let mut steps: Vec<Step> = Vec::new();
-    for raw in text.lines() {
-        let line = normalize(raw);
-        if let Some(cmd) = line.strip_prefix("$>") {
-            steps.push(Step {
-                command: cmd.trim().to_string(),
-                expected: Vec::new(),
-            });
-        } else if line.is_empty() {
-        } else if let Some(step) = steps.last_mut() {
-            if !(line.starts_with('(') && line.ends_with(')')) {
-                step.expected.push(line);
-            }
-        } else {
-            banner.push(line);
-        }
-    }
-    (banner, steps)
-}
-
-/// Types every command of a thesis transcript into the terminal. The output must have the
-/// transcript's structure: every line it printed, in order (our menus are longer), and for a
-/// `printvars` exactly the same variables in the same order, each `name - value` with six
-/// decimals and nothing else. Returns the variable listings for the caller's value checks.
-fn run_transcript(emu: &mut Emulator, file: &str) -> Vec<Vec<(String, f64)>> {
-    let (banner, steps) = parse(&thesis(file));
-    let (mut t, ours) = terminal(emu);
-    let ours: Vec<String> = ours.split("\r\n").map(normalize).collect();
-    for line in banner
-        .iter()
-        .filter(|l| !l.contains("SEEPS") && !l.contains("Sherbert"))
-    {
-        assert!(
-            ours.contains(line),
-            "{file}: banner line {line:?} missing from {ours:?}"
-        );
-    }
-    let mut listings = Vec::new();
-    assert!(!steps.is_empty());
-    for step in &steps {
-        let actual = type_line(&mut t, &step.command);
-        let expected_vars: Vec<(String, f64)> =
-            step.expected.iter().filter_map(|l| var_line(l)).collect();
-        if !expected_vars.is_empty() && expected_vars.len() == step.expected.len() {
-            let got: Vec<(String, f64)> = actual.iter().filter_map(|l| var_line(l)).collect();
-            let names = |v: &[(String, f64)]| v.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
-            assert_eq!(
-                names(&got),
-                names(&expected_vars),
-                "{file}: {}",
-                step.command
-            );
-            assert_eq!(
-                got.len(),
-                actual.len(),
-                "{file}: only variable lines expected: {actual:?}"
-            );
-            listings.push(got);
-        } else {
-            let mut at = 0;
-            for e in &step.expected {
-                let Some(i) = actual[at..].iter().position(|a| a == e) else {
-                    panic!(
-                        "{file}: after {:?} expected {e:?} in {actual:?}",
-                        step.command
-                    )
-                };
-                at += i + 1;
-            }
-            assert!(
-                !actual.iter().any(|l| l.starts_with("error:")),
-                "{file}: {} failed: {actual:?}",
-                step.command
-            );
-        }
-        // A person types: let some time pass so the variables update.
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    listings
+/// Types every command of a thesis transcript into the terminal; score_transcript holds the
+/// output to the transcript's structure (see `Transcript::check`). Returns the variable
+/// listings for the caller's value checks.
+fn run_transcript(emu: &mut Emulator, file: &str) -> Vec<Listing> {
+    let transcript = Transcript::load(file).unwrap();
+    let (mut t, banner) = terminal(emu);
+    transcript
+        .check(&banner, |command| {
+            let out = type_line(&mut t, command).join("\n");
+            // A person types: let some time pass so the variables update.
+            std::thread::sleep(Duration::from_millis(50));
+            out
+        })
+        .unwrap_or_else(|m| panic!("{m}"))
 }
 
 /// Volts of a 12-bit code with the board's f32 arithmetic: code · 3.3 / 4095 rounded to f32
