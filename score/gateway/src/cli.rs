@@ -1,10 +1,13 @@
-//! `score-gateway --port <link tty>`: one Score board on the Conductor bus.
+//! The `score-gateway --port <link tty>` program: one Score board on the Conductor bus.
 //!
 //! The domain comes from `--domain` or `CONDUCTOR_DOMAIN` (like every Conductor process), so a
-//! launcher starts it like an executor: `CONDUCTOR_DOMAIN=<d> score-gateway --port /dev/score-link`.
-//! Prints `ready <subsystem> <n> states` on stdout once the states exist; logs go to stderr;
-//! SIGINT/SIGTERM end it cleanly.
+//! launcher starts it like an executor: `score-gateway --port /dev/score-link --subsystem board
+//! --domain <d>` (what `conductor launch` does for a `[gateways.<name>]` table). Prints
+//! `ready <subsystem> <n> states` on stdout once the states exist; logs go to stderr;
+//! SIGINT/SIGTERM end it cleanly (exit 0); exit 2 on bad arguments, 1 on a fatal error (a
+//! missing board is not one: the gateway waits for it).
 
+use std::ffi::OsString;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
@@ -13,7 +16,8 @@ use std::time::Duration;
 
 use clap::Parser;
 use conductor_bus::{Bus, Domain};
-use score_gateway::{Gateway, Options};
+
+use crate::{Gateway, Options};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -45,11 +49,41 @@ struct Cli {
     retry_ms: u64,
 }
 
-fn main() -> ExitCode {
-    let cli = Cli::parse();
+/// Bad arguments (the launcher does not restart a gateway that exits with it).
+pub const EXIT_USAGE: u8 = 2;
+
+/// The node a gateway runs as: `gateway/<subsystem>` when the subsystem is given (a launcher
+/// looks for it to tell that the gateway already runs), else `score-gateway/<pid>`.
+pub fn node_name(subsystem: Option<&str>) -> String {
+    match subsystem {
+        Some(s) => format!("gateway/{s}"),
+        None => format!("score-gateway/{}", std::process::id()),
+    }
+}
+
+/// The whole program: parses `args` (the first is the program's name), runs the gateway until
+/// SIGINT/SIGTERM and returns the exit status. Another program can run it as a sub-command
+/// (`conductor __score-gateway …`); call it before starting other threads, in a process of its
+/// own (it installs SIGINT/SIGTERM handlers).
+pub fn main_with_args<I, T>(args: I) -> ExitCode
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() {
+                ExitCode::from(EXIT_USAGE)
+            } else {
+                ExitCode::SUCCESS
+            };
+        }
+    };
     if !(cli.max_rate > 0.0 && cli.lazy_rate > 0.0) {
         eprintln!("score-gateway: --max-rate and --lazy-rate must be above 0");
-        return ExitCode::from(2);
+        return ExitCode::from(EXIT_USAGE);
     }
     let domain = match cli
         .domain
@@ -60,10 +94,10 @@ fn main() -> ExitCode {
         Ok(d) => d,
         Err(e) => {
             eprintln!("score-gateway: {e}");
-            return ExitCode::from(2);
+            return ExitCode::from(EXIT_USAGE);
         }
     };
-    let node = format!("score-gateway/{}", std::process::id());
+    let node = node_name(cli.subsystem.as_deref());
     let bus = match Bus::open(&domain, &node) {
         Ok(b) => b,
         Err(e) => {
