@@ -55,6 +55,14 @@ Examples:\n  conductor launch deploy/minihubo-right-leg.toml\n  conductor launch
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<std::ffi::OsString>,
     },
+    /// Runs one Score gateway (what `launch` spawns per `[gateways.<name>]` of kind "score"; see
+    /// `score-gateway --help`).
+    #[command(name = "__score-gateway", hide = true, disable_help_flag = true)]
+    ScoreGateway {
+        /// The gateway's own arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
     /// List every state: units, rate, writable, limits, device, writer process, age.
     #[command(after_help = "Example:\n  conductor list 'leg/*'")]
     List(ListArgs),
