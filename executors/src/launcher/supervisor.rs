@@ -253,10 +253,23 @@ impl Supervisor {
             // Its own process group: a terminal's Ctrl-C reaches only the launcher, which
             // forwards it once.
             .process_group(0);
+        let gateway = matches!(c.role, Role::Gateway(_));
         // SAFETY: the closure runs in the forked child before exec and only makes the
-        // async-signal-safe prctl(2) system call.
+        // async-signal-safe sigprocmask(2) and prctl(2) system calls.
         unsafe {
-            cmd.pre_exec(|| {
+            cmd.pre_exec(move || {
+                if gateway {
+                    // A launcher that takes SIGINT/SIGTERM with sigwait has them blocked, and the
+                    // mask survives exec. An executor takes them the same way (so one arriving
+                    // while it starts waits for it); a gateway has ordinary handlers, which a
+                    // blocked signal would never reach.
+                    nix::sys::signal::pthread_sigmask(
+                        nix::sys::signal::SigmaskHow::SIG_SETMASK,
+                        Some(&nix::sys::signal::SigSet::empty()),
+                        None,
+                    )
+                    .map_err(std::io::Error::from)?;
+                }
                 // The child stops (orderly) if the launcher dies.
                 nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
             });
