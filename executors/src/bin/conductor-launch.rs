@@ -19,7 +19,7 @@ struct Cli {
     /// Bus domain (default: the manifest's `domain`, else $CONDUCTOR_DOMAIN, else "default").
     #[arg(long)]
     domain: Option<String>,
-    /// Launch only these subsystems (repeatable).
+    /// Launch only these subsystems and gateways (repeatable).
     #[arg(long = "only")]
     only: Vec<String>,
     /// Run without real-time set-up (normal scheduling, no pinning, no memory lock).

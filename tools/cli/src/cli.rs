@@ -39,11 +39,12 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Validate a manifest and run one real-time executor per subsystem until Ctrl-C/SIGTERM.
+    /// Validate a manifest and run one real-time executor per subsystem (and one process per
+    /// gateway) until Ctrl-C/SIGTERM.
     #[command(
         after_help = "Every manifest error is reported with file, line and column before \
-anything starts. Executors that crash are restarted with back-off; SIGINT/SIGTERM stop them in order
-(devices go to their safe state).
+anything starts. Executors and gateways that crash are restarted with back-off; the robot does not
+wait for a gateway's board. SIGINT/SIGTERM stop them in order (devices go to their safe state).
 
 Examples:\n  conductor launch deploy/minihubo-right-leg.toml\n  conductor launch robot.toml --check\n  conductor launch robot.toml --only leg --no-rt"
     )]
@@ -296,7 +297,7 @@ pub struct PlotArgs {
 pub struct LaunchArgs {
     /// The manifest (TOML).
     pub manifest: PathBuf,
-    /// Launch only these subsystems (repeatable).
+    /// Launch only these subsystems and gateways (repeatable).
     #[arg(long = "only", value_name = "SUBSYSTEM")]
     pub only: Vec<String>,
     /// Run without real-time set-up (normal scheduling, no pinning, no memory lock).
