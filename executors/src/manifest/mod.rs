@@ -1,5 +1,6 @@
 //! The manifest: a TOML description of a robot (system → subsystems → hardware, protocols,
-//! devices, states), validated in full before anything runs.
+//! devices, states; and gateways, boards put on the bus by their own process), validated in full
+//! before anything runs.
 //!
 //! [`Manifest::load`] either returns a consistent model, in which every link is resolved to an
 //! index, every rate to a divisor of its subsystem's base rate and every kind's parameters to
