@@ -57,3 +57,9 @@ pub fn scan_and_clean(domain: &Domain) -> Result<Scan, String> {
 pub fn executor_node_name(subsystem: &str) -> String {
     format!("executor/{subsystem}")
 }
+
+/// The name of the node a gateway publishing `subsystem` runs as (`score-gateway --subsystem`
+/// uses it, so a launcher can tell that the gateway already runs).
+pub fn gateway_node_name(subsystem: &str) -> String {
+    format!("gateway/{subsystem}")
+}

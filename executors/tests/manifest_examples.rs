@@ -1,6 +1,6 @@
 //! The manifests shipped in deploy/ and used by the tests validate, with the structure they claim.
 
-use conductor_executor::manifest::{Manifest, SafeSpec};
+use conductor_executor::manifest::{GatewayDef, GatewayKind, Manifest, SafeSpec};
 
 fn root() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -115,4 +115,55 @@ writable = true
     assert_eq!((leg.spin_ns, leg.watchdog_ns, leg.priority), (0, None, 80));
     assert_eq!(leg.states[0].min, f64::NEG_INFINITY);
     assert_eq!(leg.states[0].history, 256);
+}
+
+#[test]
+fn the_score_board_manifest_is_one_gateway_and_no_executor() {
+    let m = load("deploy/score-board.toml");
+    assert!(m.subsystems.is_empty());
+    assert_eq!(
+        m.gateways,
+        [GatewayDef {
+            name: "score-rp2040".into(),
+            kind: GatewayKind::Score,
+            port: "/dev/score-link".into(),
+            max_rate_hz: Some(1000.0),
+            lazy_rate_hz: Some(10.0),
+            restore: true,
+            retry_ms: Some(200),
+        }]
+    );
+}
+
+/// Optional gateway keys stay unset (the gateway's own defaults apply), `restore` is on unless
+/// turned off, and gateways come in document order next to subsystems.
+#[test]
+fn gateways_sit_beside_subsystems_with_defaults() {
+    let text = r#"
+        system = "bot"
+        [gateways.b2]
+        kind = "score"
+        port = "/dev/score-b2-link"
+        restore = false
+        [subsystems.leg]
+        rate_hz = 100
+        hardware.bus.kind = "loopback"
+        protocols.p = { kind = "sim", hardware = "bus" }
+        devices.d = { kind = "sim", protocol = "p", id = 1 }
+        states.knee.device = "d"
+        [gateways.b1]
+        kind = "score"
+        port = "/dev/score-b1-link"
+    "#;
+    let m = Manifest::parse(text, "inline.toml").unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(m.subsystems.len(), 1);
+    let names: Vec<&str> = m.gateways.iter().map(|g| g.name.as_str()).collect();
+    assert_eq!(names, ["b2", "b1"]);
+    let b1 = m.gateway("b1").unwrap();
+    assert_eq!(
+        (b1.max_rate_hz, b1.lazy_rate_hz, b1.restore, b1.retry_ms),
+        (None, None, true, None)
+    );
+    assert!(!m.gateway("b2").unwrap().restore);
+    assert!(m.gateway("leg").is_none());
 }

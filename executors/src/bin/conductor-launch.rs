@@ -11,7 +11,7 @@ use conductor_executor::launcher::{launch, LaunchError, LaunchOptions};
 #[derive(Parser)]
 #[command(
     version,
-    about = "Launch one real-time executor per subsystem of a Conductor manifest"
+    about = "Launch one real-time executor per subsystem (and one process per gateway) of a Conductor manifest"
 )]
 struct Cli {
     /// The manifest (TOML).
@@ -19,7 +19,7 @@ struct Cli {
     /// Bus domain (default: the manifest's `domain`, else $CONDUCTOR_DOMAIN, else "default").
     #[arg(long)]
     domain: Option<String>,
-    /// Launch only these subsystems (repeatable).
+    /// Launch only these subsystems and gateways (repeatable).
     #[arg(long = "only")]
     only: Vec<String>,
     /// Run without real-time set-up (normal scheduling, no pinning, no memory lock).
@@ -34,6 +34,9 @@ struct Cli {
     /// The executor program (default: conductor-executor next to this program, else on PATH).
     #[arg(long)]
     executor: Option<PathBuf>,
+    /// The Score gateway program (default: score-gateway next to this program, else on PATH).
+    #[arg(long)]
+    gateway: Option<PathBuf>,
     /// Only validate the manifest and exit.
     #[arg(long)]
     check: bool,
@@ -45,9 +48,10 @@ fn main() -> ExitCode {
         return match conductor_executor::manifest::Manifest::load(&cli.manifest) {
             Ok(m) => {
                 println!(
-                    "{}: valid ({} subsystems)",
+                    "{}: valid ({} subsystems, {} gateways)",
                     cli.manifest.display(),
-                    m.subsystems.len()
+                    m.subsystems.len(),
+                    m.gateways.len()
                 );
                 ExitCode::SUCCESS
             }
@@ -67,6 +71,9 @@ fn main() -> ExitCode {
     };
     if let Some(e) = cli.executor {
         opts.executor = e;
+    }
+    if let Some(g) = cli.gateway {
+        opts.gateway = g;
     }
     match launch(&cli.manifest, opts) {
         Ok(_) => ExitCode::SUCCESS,

@@ -1,7 +1,12 @@
 //! The launcher: validates a manifest, cleans what dead processes left in the domain, starts one
-//! executor process per subsystem, waits until each is ready, supervises them (restart with
-//! bounded back-off), shows a live summary, and on a stop request (SIGINT/SIGTERM or
-//! [`Launch::stop`]) stops them in order.
+//! executor process per subsystem and one gateway process per gateway, waits until each
+//! executor is ready, supervises them all (restart with bounded back-off), shows a live summary,
+//! and on a stop request (SIGINT/SIGTERM or [`Launch::stop`]) stops them in order.
+//!
+//! A gateway (a board on the bus, e.g. `score-gateway`) is started and restarted like an
+//! executor, but the launch does not wait for it: its board may be unplugged, and it reports
+//! ready (its `ready …` line) whenever the board answers. A gateway that cannot run or keeps
+//! crashing is given up (reported at once and in the final result) while the robot runs on.
 //!
 //! ```no_run
 //! use conductor_executor::launcher::{launch, LaunchOptions};
@@ -19,8 +24,8 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use crate::cleanup::{executor_node_name, scan_and_clean};
-use crate::manifest::{Manifest, ManifestError};
+use crate::cleanup::{executor_node_name, gateway_node_name, scan_and_clean};
+use crate::manifest::{GatewayDef, Manifest, ManifestError};
 use crate::process::resolve_domain;
 use crate::signals::{self, Stop};
 use supervisor::Supervisor;
@@ -33,6 +38,10 @@ pub struct LaunchOptions {
     /// Arguments put before the executor's own (e.g. a sub-command when a program runs itself
     /// as the executor).
     pub executor_args: Vec<OsString>,
+    /// The program of `kind = "score"` gateways (`score-gateway` or a program running its main).
+    pub gateway: PathBuf,
+    /// Arguments put before the gateway's own (e.g. a sub-command).
+    pub gateway_args: Vec<OsString>,
     /// Bus domain (default: the manifest's, else `CONDUCTOR_DOMAIN`, else "default").
     pub domain: Option<String>,
     /// Only these subsystems (empty: all).
@@ -65,6 +74,8 @@ impl Default for LaunchOptions {
         Self {
             executor: default_executor(),
             executor_args: Vec::new(),
+            gateway: default_gateway(),
+            gateway_args: Vec::new(),
             domain: None,
             only: Vec::new(),
             no_rt: false,
@@ -84,7 +95,16 @@ impl Default for LaunchOptions {
 /// `conductor-executor` next to the running program (where cargo and installers put it), else
 /// the one on `PATH`.
 pub fn default_executor() -> PathBuf {
-    let name = "conductor-executor";
+    beside_me("conductor-executor")
+}
+
+/// `score-gateway` next to the running program, else the one on `PATH`.
+pub fn default_gateway() -> PathBuf {
+    beside_me("score-gateway")
+}
+
+/// The program `name` next to the running one (or one directory up), else `name` for `PATH`.
+fn beside_me(name: &str) -> PathBuf {
     std::env::current_exe()
         .ok()
         .and_then(|exe| {
@@ -134,6 +154,16 @@ pub enum LaunchError {
         /// The OS error.
         source: std::io::Error,
     },
+    /// A gateway program could not be started.
+    #[error("cannot start the gateway program {program:?} for gateway {gateway:?}: {source} (build it with `cargo build -p score-gateway`, or point LaunchOptions::gateway at it)")]
+    SpawnGateway {
+        /// The gateway.
+        gateway: String,
+        /// The program.
+        program: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
     /// An executor exited or hung before it was ready.
     #[error("the executor of subsystem {subsystem:?} did not become ready: {status}{}", tail_text(.output))]
     NotReady {
@@ -169,8 +199,9 @@ pub enum LaunchError {
         /// Its last lines of output.
         output: Vec<String>,
     },
-    /// At the orderly stop, some executors did not exit cleanly.
-    #[error("not every executor stopped cleanly: {}", .failures.join("; "))]
+    /// At the orderly stop, some executors or gateways did not exit cleanly (or a gateway had
+    /// been given up).
+    #[error("not every executor and gateway stopped cleanly: {}", .failures.join("; "))]
     Unclean {
         /// `subsystem: status` for each.
         failures: Vec<String>,
@@ -188,11 +219,22 @@ fn tail_text(lines: &[String]) -> String {
     }
 }
 
-/// How each executor ended, after an orderly stop.
+/// What a supervised process is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProcessKind {
+    /// The executor of a subsystem; the launch waits until it is ready.
+    Executor,
+    /// A gateway (`[gateways.<name>]`); the launch does not wait for it.
+    Gateway,
+}
+
+/// How each executor and gateway ended, after an orderly stop.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SubsystemReport {
-    /// The subsystem.
+    /// The subsystem (for a gateway: its name, the subsystem it publishes).
     pub subsystem: String,
+    /// Executor or gateway.
+    pub kind: ProcessKind,
     /// Restarts after crashes.
     pub restarts: u32,
     /// Exit code of the last run (None: killed by a signal).
@@ -204,21 +246,27 @@ pub struct SubsystemReport {
 pub struct LaunchReport {
     /// The domain used.
     pub domain: String,
-    /// One per subsystem, in manifest order.
+    /// One per subsystem, in manifest order, then one per gateway.
     pub subsystems: Vec<SubsystemReport>,
 }
 
-/// What the handle can see of each executor while it runs.
+/// What the handle can see of each executor and gateway while it runs.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ExecutorInfo {
-    /// The subsystem.
+    /// The subsystem (for a gateway: its name).
     pub subsystem: String,
+    /// Executor or gateway.
+    pub kind: ProcessKind,
     /// Current process, if one runs.
     pub pid: Option<u32>,
     /// Restarts so far.
     pub restarts: u32,
-    /// Whether it has reported ready (since its last start).
+    /// Whether it has reported ready (since its last start). A gateway that runs but is not
+    /// ready is waiting for its board.
     pub ready: bool,
+    /// Why the launcher gave up on it (only gateways are given up; an executor that cannot run
+    /// ends the launch).
+    pub failed: Option<String>,
 }
 
 /// A running launch.
@@ -238,13 +286,14 @@ impl core::fmt::Debug for Launch {
 }
 
 /// Launches and blocks until a stop request (SIGINT/SIGTERM when `handle_signals`), then stops
-/// every executor. Returns an error as soon as one cannot run.
+/// every executor and gateway. Returns an error as soon as an executor cannot run.
 pub fn launch(manifest: &Path, opts: LaunchOptions) -> Result<LaunchReport, LaunchError> {
     Launch::start(manifest, opts)?.wait()
 }
 
 impl Launch {
-    /// Validates, cleans, starts every executor and returns once all are ready.
+    /// Validates, cleans, starts every executor and gateway and returns once every executor is
+    /// ready (gateways become ready when their boards answer).
     pub fn start(manifest_path: &Path, opts: LaunchOptions) -> Result<Launch, LaunchError> {
         let stop = Stop::new();
         if opts.handle_signals {
@@ -257,6 +306,7 @@ impl Launch {
             .subsystems
             .iter()
             .map(|s| s.name.as_str())
+            .chain(manifest.gateways.iter().map(|g| g.name.as_str()))
             .collect();
         for o in &opts.only {
             if !known.contains(&o.as_str()) {
@@ -266,16 +316,28 @@ impl Launch {
                 });
             }
         }
-        let subsystems: Vec<String> = known
+        let wanted = |n: &str| opts.only.is_empty() || opts.only.iter().any(|o| o == n);
+        let subsystems: Vec<String> = manifest
+            .subsystems
             .iter()
-            .filter(|n| opts.only.is_empty() || opts.only.iter().any(|o| o == *n))
-            .map(|n| n.to_string())
+            .filter(|s| wanted(&s.name))
+            .map(|s| s.name.clone())
+            .collect();
+        let gateways: Vec<GatewayDef> = manifest
+            .gateways
+            .iter()
+            .filter(|g| wanted(&g.name))
+            .cloned()
             .collect();
 
         // Nothing of a previous run may be in the way.
         let scan = scan_and_clean(&domain).map_err(LaunchError::Bus)?;
-        for s in &subsystems {
-            let node = executor_node_name(s);
+        let nodes = subsystems.iter().map(|s| (s, executor_node_name(s))).chain(
+            gateways
+                .iter()
+                .map(|g| (&g.name, gateway_node_name(&g.name))),
+        );
+        for (s, node) in nodes {
             if let Some(n) = scan.alive.iter().find(|n| n.name == node) {
                 return Err(LaunchError::AlreadyRunning {
                     subsystem: s.clone(),
@@ -295,11 +357,15 @@ impl Launch {
         let info = Arc::new(Mutex::new(
             subsystems
                 .iter()
-                .map(|s| ExecutorInfo {
+                .map(|s| (s, ProcessKind::Executor))
+                .chain(gateways.iter().map(|g| (&g.name, ProcessKind::Gateway)))
+                .map(|(s, kind)| ExecutorInfo {
                     subsystem: s.clone(),
+                    kind,
                     pid: None,
                     restarts: 0,
                     ready: false,
+                    failed: None,
                 })
                 .collect(),
         ));
@@ -310,7 +376,7 @@ impl Launch {
         let sup = Supervisor::new(opts, path, domain.clone(), stop.clone(), info.clone());
         let thread = std::thread::Builder::new()
             .name("supervisor".into())
-            .spawn(move || sup.run(subsystems, ready_tx))
+            .spawn(move || sup.run(subsystems, gateways, ready_tx))
             .map_err(|e| LaunchError::Bus(e.to_string()))?;
         match ready_rx.recv() {
             Ok(()) => Ok(Launch {
@@ -328,12 +394,12 @@ impl Launch {
         }
     }
 
-    /// Current executors.
+    /// Current executors, then gateways.
     pub fn executors(&self) -> Vec<ExecutorInfo> {
         self.info.lock().map(|v| v.clone()).unwrap_or_default()
     }
 
-    /// The process of `subsystem`'s executor, if one runs.
+    /// The process of `subsystem`'s executor (or of the gateway of that name), if one runs.
     pub fn pid(&self, subsystem: &str) -> Option<u32> {
         self.executors()
             .into_iter()

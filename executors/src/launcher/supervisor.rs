@@ -1,7 +1,9 @@
-//! The supervisor thread: spawns the executors, waits for their readiness, restarts crashed ones
-//! with back-off, draws the summary, and stops them in order.
+//! The supervisor thread: spawns the executors and gateways, waits for the executors'
+//! readiness, restarts crashed processes with back-off, draws the summary, and stops them in
+//! order.
 
 use std::collections::VecDeque;
+use std::ffi::OsString;
 use std::io::{BufRead, BufReader, IsTerminal, Write as _};
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::PathBuf;
@@ -15,13 +17,15 @@ use conductor_bus::{Bus, Domain, StatsSubscriber};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 
-use super::{ExecutorInfo, LaunchError, LaunchOptions, LaunchReport, SubsystemReport};
+use super::{ExecutorInfo, LaunchError, LaunchOptions, LaunchReport, ProcessKind, SubsystemReport};
 use crate::cleanup::scan_and_clean;
+use crate::manifest::{GatewayDef, GatewayKind};
 use crate::process::{EXIT_CONFIG, EXIT_NO_RT, READY};
 use crate::signals::Stop;
 
 enum EventKind {
-    Ready,
+    /// The process reported ready; for a gateway, what its ready line said after its name.
+    Ready(String),
 }
 
 struct Event {
@@ -37,8 +41,24 @@ enum Phase {
     Stopped,
 }
 
+/// What a supervised process runs.
+enum Role {
+    Executor,
+    Gateway(GatewayDef),
+}
+
+impl Role {
+    fn kind(&self) -> ProcessKind {
+        match self {
+            Role::Executor => ProcessKind::Executor,
+            Role::Gateway(_) => ProcessKind::Gateway,
+        }
+    }
+}
+
 struct ChildRt {
     subsystem: String,
+    role: Role,
     proc: Option<Child>,
     phase: Phase,
     generation: u64,
@@ -49,6 +69,10 @@ struct ChildRt {
     /// Forwards the executor's stderr; ends at EOF, i.e. once the process is gone.
     output: Option<JoinHandle<()>>,
     exit: Option<ExitStatus>,
+    /// What the last ready line said (gateways: `<n> states`).
+    ready_text: String,
+    /// Why the launcher gave up on this gateway.
+    failed: Option<String>,
 }
 
 impl ChildRt {
@@ -80,6 +104,47 @@ const TAIL_LINES: usize = 12;
 const POLL: Duration = Duration::from_millis(20);
 /// A run this long resets the back-off.
 const STABLE: Duration = Duration::from_secs(30);
+
+/// The arguments of a gateway process (after [`LaunchOptions::gateway_args`]).
+pub(super) fn gateway_args(g: &GatewayDef, domain: &str) -> Vec<OsString> {
+    match g.kind {
+        GatewayKind::Score => {
+            let mut a: Vec<OsString> = vec![
+                "--port".into(),
+                g.port.clone().into(),
+                "--subsystem".into(),
+                g.name.clone().into(),
+                "--domain".into(),
+                domain.into(),
+            ];
+            if let Some(r) = g.max_rate_hz {
+                a.extend(["--max-rate".into(), r.to_string().into()]);
+            }
+            if let Some(r) = g.lazy_rate_hz {
+                a.extend(["--lazy-rate".into(), r.to_string().into()]);
+            }
+            if !g.restore {
+                a.push("--no-restore".into());
+            }
+            if let Some(ms) = g.retry_ms {
+                a.extend(["--retry-ms".into(), ms.to_string().into()]);
+            }
+            a
+        }
+    }
+}
+
+/// What follows the name in a gateway's `ready <subsystem> <what>` line (`3 states`).
+pub(super) fn gateway_ready(line: &str) -> Option<String> {
+    let rest = line.trim().strip_prefix("ready ")?;
+    let (_, what) = rest.split_once(' ').unwrap_or((rest, ""));
+    Some(what.to_string())
+}
+
+/// An executor's `READY` line.
+fn executor_ready(line: &str) -> Option<String> {
+    (line.trim() == READY).then(String::new)
+}
 
 fn describe(status: &ExitStatus) -> String {
     match (status.code(), status.signal()) {
@@ -114,11 +179,18 @@ impl Supervisor {
     pub(super) fn run(
         mut self,
         subsystems: Vec<String>,
+        gateways: Vec<GatewayDef>,
         ready: Sender<()>,
     ) -> Result<LaunchReport, LaunchError> {
-        for s in subsystems {
+        let roles = subsystems.into_iter().map(|s| (s, Role::Executor)).chain(
+            gateways
+                .into_iter()
+                .map(|g| (g.name.clone(), Role::Gateway(g))),
+        );
+        for (s, role) in roles {
             self.children.push(ChildRt {
                 subsystem: s,
+                role,
                 proc: None,
                 phase: Phase::Stopped,
                 generation: 0,
@@ -128,9 +200,11 @@ impl Supervisor {
                 tail: Arc::new(Mutex::new(VecDeque::new())),
                 output: None,
                 exit: None,
+                ready_text: String::new(),
+                failed: None,
             });
         }
-        // Start everything and wait for every READY.
+        // Start everything and wait for every executor's READY (not for the gateways).
         for i in 0..self.children.len() {
             if let Err(e) = self.spawn(i) {
                 let _ = self.stop_all();
@@ -151,46 +225,81 @@ impl Supervisor {
     fn spawn(&mut self, i: usize) -> Result<(), LaunchError> {
         let c = &mut self.children[i];
         c.generation += 1;
-        let mut cmd = Command::new(&self.opts.executor);
-        cmd.args(&self.opts.executor_args)
-            .arg("--manifest")
-            .arg(&self.manifest)
-            .arg("--subsystem")
-            .arg(&c.subsystem)
-            .arg("--domain")
-            .arg(self.domain.name())
-            .stdin(Stdio::null())
+        let mut cmd = match &c.role {
+            Role::Executor => {
+                let mut cmd = Command::new(&self.opts.executor);
+                cmd.args(&self.opts.executor_args)
+                    .arg("--manifest")
+                    .arg(&self.manifest)
+                    .arg("--subsystem")
+                    .arg(&c.subsystem)
+                    .arg("--domain")
+                    .arg(self.domain.name());
+                if self.opts.no_rt {
+                    cmd.arg("--no-rt");
+                }
+                cmd
+            }
+            Role::Gateway(g) => {
+                let mut cmd = Command::new(&self.opts.gateway);
+                cmd.args(&self.opts.gateway_args)
+                    .args(gateway_args(g, self.domain.name()));
+                cmd
+            }
+        };
+        cmd.stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             // Its own process group: a terminal's Ctrl-C reaches only the launcher, which
             // forwards it once.
             .process_group(0);
-        if self.opts.no_rt {
-            cmd.arg("--no-rt");
-        }
+        let gateway = matches!(c.role, Role::Gateway(_));
         // SAFETY: the closure runs in the forked child before exec and only makes the
-        // async-signal-safe prctl(2) system call.
+        // async-signal-safe sigprocmask(2) and prctl(2) system calls.
         unsafe {
-            cmd.pre_exec(|| {
-                // The executor stops (orderly) if the launcher dies.
+            cmd.pre_exec(move || {
+                if gateway {
+                    // A launcher that takes SIGINT/SIGTERM with sigwait has them blocked, and the
+                    // mask survives exec. An executor takes them the same way (so one arriving
+                    // while it starts waits for it); a gateway has ordinary handlers, which a
+                    // blocked signal would never reach.
+                    nix::sys::signal::pthread_sigmask(
+                        nix::sys::signal::SigmaskHow::SIG_SETMASK,
+                        Some(&nix::sys::signal::SigSet::empty()),
+                        None,
+                    )
+                    .map_err(std::io::Error::from)?;
+                }
+                // The child stops (orderly) if the launcher dies.
                 nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
             });
         }
-        let mut child = cmd.spawn().map_err(|source| LaunchError::Spawn {
-            subsystem: c.subsystem.clone(),
-            program: self.opts.executor.clone(),
-            source,
+        let mut child = cmd.spawn().map_err(|source| match &c.role {
+            Role::Executor => LaunchError::Spawn {
+                subsystem: c.subsystem.clone(),
+                program: self.opts.executor.clone(),
+                source,
+            },
+            Role::Gateway(_) => LaunchError::SpawnGateway {
+                gateway: c.subsystem.clone(),
+                program: self.opts.gateway.clone(),
+                source,
+            },
         })?;
         let stdout = child.stdout.take().expect("piped");
         let stderr = child.stderr.take().expect("piped");
         let (tx, generation) = (self.events.0.clone(), c.generation);
+        let ready_line = match c.role {
+            Role::Executor => executor_ready,
+            Role::Gateway(_) => gateway_ready,
+        };
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if line.trim() == READY {
+                if let Some(what) = ready_line(&line) {
                     let _ = tx.send(Event {
                         child: i,
                         generation,
-                        kind: EventKind::Ready,
+                        kind: EventKind::Ready(what),
                     });
                 }
             }
@@ -215,6 +324,13 @@ impl Supervisor {
         c.phase = Phase::Starting {
             since: Instant::now(),
         };
+        if let Role::Gateway(g) = &c.role {
+            note!(
+                "conductor: gateway {} started (pid {pid}), waiting for its board on {}",
+                c.subsystem,
+                g.port.display()
+            );
+        }
         self.set_info(i, Some(pid), false);
         Ok(())
     }
@@ -224,7 +340,22 @@ impl Supervisor {
             v[i].pid = pid;
             v[i].ready = ready;
             v[i].restarts = self.children[i].restarts;
+            v[i].failed = self.children[i].failed.clone();
         }
+    }
+
+    /// Stops restarting gateway `i` (it cannot run or keeps crashing); the robot runs on.
+    fn give_up(&mut self, i: usize, reason: String) {
+        let c = &mut self.children[i];
+        c.phase = Phase::Stopped;
+        c.drain_output();
+        note!(
+            "conductor: giving up on gateway {}: {reason}; the rest of the robot runs on{}",
+            self.children[i].subsystem,
+            super::tail_text(&self.tail(i))
+        );
+        self.children[i].failed = Some(reason);
+        self.set_info(i, None, false);
     }
 
     fn tail(&self, i: usize) -> Vec<String> {
@@ -242,17 +373,25 @@ impl Supervisor {
                 continue;
             }
             match ev.kind {
-                EventKind::Ready => {
+                EventKind::Ready(what) => {
                     if matches!(c.phase, Phase::Starting { .. }) {
                         c.phase = Phase::Running {
                             since: Instant::now(),
                         };
                         let pid = c.proc.as_ref().map(Child::id);
-                        note!(
-                            "conductor: subsystem {} ready (pid {})",
-                            c.subsystem,
-                            pid.map_or("?".into(), |p| p.to_string())
-                        );
+                        let pid = pid.map_or("?".into(), |p| p.to_string());
+                        match &c.role {
+                            Role::Executor => {
+                                note!("conductor: subsystem {} ready (pid {pid})", c.subsystem)
+                            }
+                            Role::Gateway(g) => note!(
+                                "conductor: gateway {} ready (pid {pid}): {what} from {}",
+                                c.subsystem,
+                                g.port.display()
+                            ),
+                        }
+                        c.ready_text = what;
+                        let pid = c.proc.as_ref().map(Child::id);
                         self.set_info(ev.child, pid, true);
                     }
                 }
@@ -265,9 +404,11 @@ impl Supervisor {
             self.handle_events();
             for i in 0..self.children.len() {
                 let c = &mut self.children[i];
-                let Phase::Starting { since } = c.phase else {
+                // Gateways are supervised from the start but not waited for.
+                let (Phase::Starting { since }, Role::Executor) = (&c.phase, &c.role) else {
                     continue;
                 };
+                let since = *since;
                 if let Some(status) = c.proc.as_mut().and_then(|p| p.try_wait().ok().flatten()) {
                     c.proc = None;
                     c.phase = Phase::Stopped;
@@ -297,11 +438,9 @@ impl Supervisor {
                     });
                 }
             }
-            if self
-                .children
-                .iter()
-                .all(|c| matches!(c.phase, Phase::Running { .. }))
-            {
+            if self.children.iter().all(|c| {
+                matches!(c.role, Role::Gateway(_)) || matches!(c.phase, Phase::Running { .. })
+            }) {
                 return Ok(());
             }
             if self.stop.requested() {
@@ -320,9 +459,12 @@ impl Supervisor {
         let mut stats: Vec<Option<StatsSubscriber>> = self
             .children
             .iter()
-            .map(|c| {
-                bus.as_ref()
-                    .and_then(|b| StatsSubscriber::new(b, &c.subsystem).ok())
+            .map(|c| match c.role {
+                Role::Executor => bus
+                    .as_ref()
+                    .and_then(|b| StatsSubscriber::new(b, &c.subsystem).ok()),
+                // A gateway publishes no executor stats.
+                Role::Gateway(_) => None,
             })
             .collect();
         let tty = std::io::stderr().is_terminal();
@@ -367,21 +509,39 @@ impl Supervisor {
                     let _ = scan_and_clean(&self.domain);
                     let c = &mut self.children[i];
                     c.restarts += 1;
+                    let what = match c.role {
+                        Role::Executor => "subsystem",
+                        Role::Gateway(_) => "gateway",
+                    };
                     note!(
-                        "conductor: restarting subsystem {} (restart {}, after {})",
+                        "conductor: restarting {what} {} (restart {}, after {})",
                         c.subsystem,
                         c.restarts,
                         describe(&last)
                     );
-                    self.spawn(i)?;
+                    match self.spawn(i) {
+                        Ok(()) => {}
+                        Err(e) if matches!(self.children[i].role, Role::Gateway(_)) => {
+                            self.give_up(i, e.to_string())
+                        }
+                        Err(e) => return Err(e),
+                    }
                 }
                 return Ok(());
             }
             Phase::Stopped => return Ok(()),
-            Phase::Starting { since } if now.duration_since(since) > self.opts.ready_timeout => {
-                // Hung before READY: treat it as a crash.
-                if let Some(p) = self.children[i].proc.as_mut() {
-                    let _ = p.kill();
+            Phase::Starting { since } => {
+                let waited = now.duration_since(since);
+                match self.children[i].role {
+                    Role::Executor if waited > self.opts.ready_timeout => {
+                        // Hung before READY: treat it as a crash.
+                        if let Some(p) = self.children[i].proc.as_mut() {
+                            let _ = p.kill();
+                        }
+                    }
+                    // A gateway waiting this long for its board is not crashing.
+                    Role::Gateway(_) if waited > STABLE => self.children[i].consecutive = 0,
+                    _ => {}
                 }
             }
             Phase::Running { since } if now.duration_since(since) > STABLE => {
@@ -395,6 +555,11 @@ impl Supervisor {
         };
         c.proc = None;
         let code = status.code().map(|c| c as u8);
+        let gateway = matches!(c.role, Role::Gateway(_));
+        if gateway && code == Some(EXIT_CONFIG) {
+            self.give_up(i, format!("it cannot run ({})", describe(&status)));
+            return Ok(());
+        }
         if matches!(code, Some(EXIT_CONFIG) | Some(EXIT_NO_RT)) {
             c.phase = Phase::Stopped;
             c.drain_output();
@@ -416,8 +581,18 @@ impl Supervisor {
             c.crashes.pop_front();
         }
         if c.crashes.len() as u32 > self.opts.max_restarts {
-            c.phase = Phase::Stopped;
             let crashes = c.crashes.len() as u32;
+            if gateway {
+                self.give_up(
+                    i,
+                    format!(
+                        "it crashed {crashes} times within {window:?} (last: {})",
+                        describe(&status)
+                    ),
+                );
+                return Ok(());
+            }
+            c.phase = Phase::Stopped;
             c.drain_output();
             return Err(LaunchError::TooManyRestarts {
                 subsystem: self.children[i].subsystem.clone(),
@@ -434,7 +609,8 @@ impl Supervisor {
             .saturating_mul(1 << (c.consecutive - 1).min(16))
             .min(self.opts.backoff_max);
         note!(
-            "conductor: subsystem {} stopped unexpectedly ({}); restarting in {:?}",
+            "conductor: {} {} stopped unexpectedly ({}); restarting in {:?}",
+            if gateway { "gateway" } else { "subsystem" },
             c.subsystem,
             describe(&status),
             delay
@@ -450,6 +626,10 @@ impl Supervisor {
     fn summary(&self, bus: &Bus, stats: &mut [Option<StatsSubscriber>]) -> Vec<String> {
         let mut lines = Vec::new();
         for (i, c) in self.children.iter().enumerate() {
+            if let Role::Gateway(g) = &c.role {
+                lines.push(gateway_summary(c, g));
+                continue;
+            }
             if stats[i].is_none() {
                 stats[i] = StatsSubscriber::new(bus, &c.subsystem).ok();
             }
@@ -479,8 +659,8 @@ impl Supervisor {
         lines
     }
 
-    /// Stops every executor (forwarding the signal that asked for it), waits, kills stragglers,
-    /// removes what they left behind.
+    /// Stops every executor and gateway (forwarding the signal that asked for it), waits, kills
+    /// stragglers, removes what they left behind.
     fn stop_all(&mut self) -> Result<LaunchReport, LaunchError> {
         let sig = Signal::try_from(self.stop.signal()).unwrap_or(Signal::SIGTERM);
         for c in &self.children {
@@ -515,11 +695,27 @@ impl Supervisor {
             }
             c.phase = Phase::Stopped;
         }
+        for c in &self.children {
+            if let Some(why) = &c.failed {
+                failures.push(format!("gateway {}: given up: {why}", c.subsystem));
+            }
+        }
         let _ = scan_and_clean(&self.domain);
         for i in 0..self.children.len() {
             self.set_info(i, None, false);
         }
-        note!("conductor: {} executor(s) stopped", self.children.len());
+        let gateways = self
+            .children
+            .iter()
+            .filter(|c| matches!(c.role, Role::Gateway(_)))
+            .count();
+        match gateways {
+            0 => note!("conductor: {} executor(s) stopped", self.children.len()),
+            g => note!(
+                "conductor: {} executor(s) and {g} gateway(s) stopped",
+                self.children.len() - g
+            ),
+        }
         if !failures.is_empty() {
             return Err(LaunchError::Unclean { failures });
         }
@@ -530,10 +726,102 @@ impl Supervisor {
                 .iter()
                 .map(|c| SubsystemReport {
                     subsystem: c.subsystem.clone(),
+                    kind: c.role.kind(),
                     restarts: c.restarts,
                     exit_code: c.exit.and_then(|s| s.code()),
                 })
                 .collect(),
         })
+    }
+}
+
+/// A gateway's summary line: its board, what it publishes, restarts, and what it is doing.
+fn gateway_summary(c: &ChildRt, g: &GatewayDef) -> String {
+    let state = match (&c.phase, &c.failed) {
+        (_, Some(why)) => format!(" (given up: {why})"),
+        (Phase::Running { .. }, _) => String::new(),
+        (Phase::Starting { .. }, _) => " (waiting for its board)".into(),
+        (Phase::Waiting { .. }, _) => " (restarting)".into(),
+        (Phase::Stopped, _) => " (stopped)".into(),
+    };
+    let what = if c.ready_text.is_empty() {
+        String::new()
+    } else {
+        format!("{}  ", c.ready_text)
+    };
+    format!(
+        "conductor: {:<16} {} gateway on {}  {what}restarts {}{state}",
+        c.subsystem,
+        g.kind.name(),
+        g.port.display(),
+        c.restarts
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn def() -> GatewayDef {
+        GatewayDef {
+            name: "board".into(),
+            kind: GatewayKind::Score,
+            port: "/dev/score-link".into(),
+            max_rate_hz: None,
+            lazy_rate_hz: None,
+            restore: true,
+            retry_ms: None,
+        }
+    }
+
+    fn strings(a: Vec<OsString>) -> Vec<String> {
+        a.into_iter().map(|s| s.into_string().unwrap()).collect()
+    }
+
+    #[test]
+    fn gateway_arguments_carry_only_what_the_manifest_sets() {
+        assert_eq!(
+            strings(gateway_args(&def(), "d1")),
+            [
+                "--port",
+                "/dev/score-link",
+                "--subsystem",
+                "board",
+                "--domain",
+                "d1"
+            ]
+        );
+        let g = GatewayDef {
+            max_rate_hz: Some(500.0),
+            lazy_rate_hz: Some(2.5),
+            restore: false,
+            retry_ms: Some(50),
+            ..def()
+        };
+        assert_eq!(
+            strings(gateway_args(&g, "d1"))[6..],
+            [
+                "--max-rate",
+                "500",
+                "--lazy-rate",
+                "2.5",
+                "--no-restore",
+                "--retry-ms",
+                "50"
+            ]
+        );
+    }
+
+    #[test]
+    fn ready_lines() {
+        assert_eq!(
+            gateway_ready("ready board 3 states\n").as_deref(),
+            Some("3 states")
+        );
+        assert_eq!(gateway_ready("ready board").as_deref(), Some(""));
+        assert_eq!(gateway_ready("score-gateway: ready soon"), None);
+        assert_eq!(gateway_ready("READY"), None);
+        assert_eq!(executor_ready(" READY\n").as_deref(), Some(""));
+        assert_eq!(executor_ready("ready board 3 states"), None);
     }
 }

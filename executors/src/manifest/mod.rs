@@ -1,5 +1,6 @@
 //! The manifest: a TOML description of a robot (system → subsystems → hardware, protocols,
-//! devices, states), validated in full before anything runs.
+//! devices, states; and gateways, boards put on the bus by their own process), validated in full
+//! before anything runs.
 //!
 //! [`Manifest::load`] either returns a consistent model, in which every link is resolved to an
 //! index, every rate to a divisor of its subsystem's base rate and every kind's parameters to
@@ -63,8 +64,17 @@ pub const SUBSYSTEM_KEYS: &[&str] = &[
     "devices",
     "states",
 ];
+/// Keys of a gateway table.
+pub const GATEWAY_KEYS: &[&str] = &[
+    "kind",
+    "port",
+    "max_rate_hz",
+    "lazy_rate_hz",
+    "restore",
+    "retry_ms",
+];
 /// Top-level keys.
-pub const TOP_KEYS: &[&str] = &["system", "domain", "subsystems"];
+pub const TOP_KEYS: &[&str] = &["system", "domain", "subsystems", "gateways"];
 
 /// Highest base rate a subsystem may ask for (Hz).
 pub const MAX_RATE_HZ: f64 = 100_000.0;
@@ -119,6 +129,53 @@ pub struct Manifest {
     pub domain: Option<String>,
     /// Subsystems in document order; each runs as one executor process.
     pub subsystems: Vec<Subsystem>,
+    /// Gateways in document order; each runs as one gateway process.
+    pub gateways: Vec<GatewayDef>,
+}
+
+/// What program a gateway runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GatewayKind {
+    /// `score-gateway`: a Score board (score/firmware) on its binary USB link.
+    Score,
+}
+
+impl GatewayKind {
+    /// Every kind, as written in a manifest.
+    pub const ALL: &'static [GatewayKind] = &[GatewayKind::Score];
+
+    /// The manifest's name of the kind.
+    pub fn name(self) -> &'static str {
+        match self {
+            GatewayKind::Score => "score",
+        }
+    }
+
+    /// The kind written `name`.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.iter().copied().find(|k| k.name() == name)
+    }
+}
+
+/// A gateway: a process that puts a board on the bus as the states of subsystem `name`. The
+/// launcher starts and supervises it like an executor, but does not wait for it to be ready
+/// (its board may be unplugged).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GatewayDef {
+    /// The subsystem it publishes (unique among subsystems and gateways).
+    pub name: String,
+    /// Which gateway program.
+    pub kind: GatewayKind,
+    /// The board's link device (an exclusive resource, like a serial hardware's port).
+    pub port: PathBuf,
+    /// Highest publish rate per variable (Hz); `None`: the gateway's default.
+    pub max_rate_hz: Option<f64>,
+    /// Publish rate of variables without a rate of their own (Hz); `None`: the gateway's default.
+    pub lazy_rate_hz: Option<f64>,
+    /// Replay the last configuration onto a board that comes back empty.
+    pub restore: bool,
+    /// Pause between reconnection attempts (ms); `None`: the gateway's default.
+    pub retry_ms: Option<u64>,
 }
 
 /// One executor: a base tick and the components it schedules.
@@ -325,6 +382,11 @@ impl Manifest {
     /// The subsystem called `name`.
     pub fn subsystem(&self, name: &str) -> Option<&Subsystem> {
         self.subsystems.iter().find(|s| s.name == name)
+    }
+
+    /// The gateway called `name`.
+    pub fn gateway(&self, name: &str) -> Option<&GatewayDef> {
+        self.gateways.iter().find(|g| g.name == name)
     }
 }
 

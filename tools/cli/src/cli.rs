@@ -39,11 +39,12 @@ pub struct Cli {
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Validate a manifest and run one real-time executor per subsystem until Ctrl-C/SIGTERM.
+    /// Validate a manifest and run one real-time executor per subsystem (and one process per
+    /// gateway) until Ctrl-C/SIGTERM.
     #[command(
         after_help = "Every manifest error is reported with file, line and column before \
-anything starts. Executors that crash are restarted with back-off; SIGINT/SIGTERM stop them in order
-(devices go to their safe state).
+anything starts. Executors and gateways that crash are restarted with back-off; the robot does not
+wait for a gateway's board. SIGINT/SIGTERM stop them in order (devices go to their safe state).
 
 Examples:\n  conductor launch deploy/minihubo-right-leg.toml\n  conductor launch robot.toml --check\n  conductor launch robot.toml --only leg --no-rt"
     )]
@@ -52,6 +53,14 @@ Examples:\n  conductor launch deploy/minihubo-right-leg.toml\n  conductor launch
     #[command(name = "__executor", hide = true, disable_help_flag = true)]
     Executor {
         /// The executor's own arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
+    /// Runs one Score gateway (what `launch` spawns per `[gateways.<name>]` of kind "score"; see
+    /// `score-gateway --help`).
+    #[command(name = "__score-gateway", hide = true, disable_help_flag = true)]
+    ScoreGateway {
+        /// The gateway's own arguments.
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<std::ffi::OsString>,
     },
@@ -288,7 +297,7 @@ pub struct PlotArgs {
 pub struct LaunchArgs {
     /// The manifest (TOML).
     pub manifest: PathBuf,
-    /// Launch only these subsystems (repeatable).
+    /// Launch only these subsystems and gateways (repeatable).
     #[arg(long = "only", value_name = "SUBSYSTEM")]
     pub only: Vec<String>,
     /// Run without real-time set-up (normal scheduling, no pinning, no memory lock).

@@ -1,5 +1,6 @@
 //! `conductor launch`: the launcher from `conductor-executor`, with this same binary as the
-//! executor program (a hidden `__executor` sub-command), so `conductor` alone runs a robot.
+//! executor program (a hidden `__executor` sub-command) and as the Score gateway (a hidden
+//! `__score-gateway` sub-command), so `conductor` alone runs a robot and its Score boards.
 
 use std::ffi::OsString;
 use std::process::ExitCode;
@@ -20,9 +21,10 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
         return match Manifest::load(&a.manifest) {
             Ok(m) => {
                 println!(
-                    "{}: valid ({} subsystems)",
+                    "{}: valid ({} subsystems, {} gateways)",
                     a.manifest.display(),
-                    m.subsystems.len()
+                    m.subsystems.len(),
+                    m.gateways.len()
                 );
                 ExitCode::SUCCESS
             }
@@ -40,8 +42,10 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
         }
     };
     let opts = LaunchOptions {
-        executor: exe,
+        executor: exe.clone(),
         executor_args: vec!["__executor".into()],
+        gateway: exe,
+        gateway_args: vec!["__score-gateway".into()],
         domain: domain.map(str::to_string),
         only: a.only.clone(),
         no_rt: a.no_rt,
@@ -67,4 +71,11 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
 pub fn executor(args: &[OsString]) -> ExitCode {
     let argv = std::iter::once(OsString::from("conductor __executor")).chain(args.iter().cloned());
     conductor_executor::process::main_with_args(argv)
+}
+
+/// Runs one Score gateway with its own arguments (what `launch` spawns per Score gateway).
+pub fn score_gateway(args: &[OsString]) -> ExitCode {
+    let argv =
+        std::iter::once(OsString::from("conductor __score-gateway")).chain(args.iter().cloned());
+    score_gateway::main_with_args(argv)
 }

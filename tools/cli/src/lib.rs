@@ -57,9 +57,12 @@ pub fn run(cli: Cli) -> Result<()> {
         Ok(Bus::open(&d, &format!("conductor-cli/{what}"))?)
     };
     match &cli.command {
-        Command::Launch(_) | Command::Executor { .. } => Err(CliError::Usage(
-            "launch runs from the conductor binary's main (it owns the process's signals)".into(),
-        )),
+        Command::Launch(_) | Command::Executor { .. } | Command::ScoreGateway { .. } => {
+            Err(CliError::Usage(
+                "launch runs from the conductor binary's main (it owns the process's signals)"
+                    .into(),
+            ))
+        }
         Command::List(a) => list::run(&bus("list")?, a).map(drop),
         Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
         Command::Set(a) => get_set::set(&bus("set")?, a),

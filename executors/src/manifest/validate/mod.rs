@@ -4,13 +4,15 @@
 //! Errors do not cascade: a component with an error is still known by name, so links to it are
 //! not reported as dangling, but checks that need its content (a device's channels) are skipped.
 //!
-//! * this module: the document, subsystems, and checks across subsystems;
+//! * this module: the document, subsystems, and checks across subsystems and gateways;
 //! * [`components`]: hardware, protocol, device and state tables;
+//! * [`gateways`]: gateway tables;
 //! * [`fields`]: the checks shared by them (names, rates, kinds and their parameters, links,
 //!   calibration).
 
 mod components;
 mod fields;
+mod gateways;
 
 use std::ops::Range;
 use std::path::Path;
@@ -29,7 +31,7 @@ use super::{
 use components::{device, hardware, protocol, state, HwOut, ProtoOut, SafePending};
 use fields::{check_name, fmt_num};
 
-/// An exclusive OS resource (a serial port, a CAN interface) and who holds it.
+/// An exclusive OS resource (a serial port, a CAN interface, a gateway's board) and who holds it.
 pub(super) struct Resource {
     pub(super) value: String,
     pub(super) param: &'static str,
@@ -80,11 +82,23 @@ pub(super) fn validate(
             cx.d.error(&dom.span, "domain", e.to_string());
         }
     }
+    // Gateways first: whether there are any decides if subsystems are required.
+    let mut gateways = Vec::new();
+    let mut gateway_names: Vec<(String, Range<usize>)> = Vec::new();
+    if let Some(mut gws) = top.table(&mut cx.d, "gateways") {
+        for (name, table) in gws.named_tables(&mut cx.d, "a gateway table") {
+            gateway_names.push((name.value.clone(), name.span.clone()));
+            if let Some(mut table) = table {
+                gateways.push(gateways::gateway(&mut cx, &name, &mut table));
+            }
+        }
+    }
     let mut subsystems = Vec::new();
+    let mut subsystem_names: Vec<(String, Range<usize>)> = Vec::new();
     match top.table(&mut cx.d, "subsystems") {
         Some(mut subs) => {
             let entries = subs.named_tables(&mut cx.d, "a subsystem table");
-            if entries.is_empty() && subs.keys().is_empty() {
+            if entries.is_empty() && subs.keys().is_empty() && gateway_names.is_empty() {
                 cx.d.error(
                     &subs.span,
                     "subsystems",
@@ -92,13 +106,14 @@ pub(super) fn validate(
                 );
             }
             for (name, table) in entries {
+                subsystem_names.push((name.value.clone(), name.span.clone()));
                 match table {
                     Some(table) => subsystems.push(subsystem(&mut cx, name, table)),
                     None => subsystems.push(None),
                 }
             }
         }
-        None if top.span_of("subsystems").is_none() => cx.d.error(
+        None if top.span_of("subsystems").is_none() && gateway_names.is_empty() => cx.d.error(
             &(0..0),
             "subsystems",
             "missing required key `subsystems` (at least one [subsystems.<name>] table)",
@@ -106,6 +121,7 @@ pub(super) fn validate(
         None => {}
     }
     top.finish(&mut cx.d, TOP_KEYS);
+    check_gateway_names(&mut cx, &subsystem_names, &gateway_names);
     check_resources(&mut cx);
 
     if !cx.d.is_empty() {
@@ -118,6 +134,7 @@ pub(super) fn validate(
         system: system.map(|s| s.value).unwrap_or_default(),
         domain: domain.map(|d| d.value),
         subsystems: subsystems.into_iter().flatten().collect(),
+        gateways: gateways.into_iter().flatten().collect(),
     })
 }
 
@@ -385,8 +402,33 @@ fn subsystem(cx: &mut Ctx, name: At<String>, mut t: Table) -> Option<Subsystem> 
     })
 }
 
-/// Two hardware components anywhere in the manifest may not open the same OS resource.
+/// A gateway publishes the subsystem of its name: no subsystem may have it too.
+fn check_gateway_names(
+    cx: &mut Ctx,
+    subsystems: &[(String, Range<usize>)],
+    gateways: &[(String, Range<usize>)],
+) {
+    for (name, span) in gateways {
+        if let Some((_, first)) = subsystems.iter().find(|(s, _)| s == name) {
+            let (line, _) = line_column(cx.source, first.start);
+            cx.d.error(
+                span,
+                &format!("gateways.{}", quote_key(name)),
+                format!(
+                    "subsystem {name:?} is already defined (line {line}); expected a gateway \
+                     name unique among subsystems and gateways (the gateway publishes the \
+                     states of subsystem {name:?})"
+                ),
+            );
+        }
+    }
+}
+
+/// Two hardware components or gateways anywhere in the manifest may not open the same OS
+/// resource.
 fn check_resources(cx: &mut Ctx) {
+    // Document order, so "already used by" names the first use in the file.
+    cx.resources.sort_by_key(|r| r.span.start);
     for (i, r) in cx.resources.iter().enumerate() {
         if let Some(first) = cx.resources[..i]
             .iter()
@@ -398,7 +440,7 @@ fn check_resources(cx: &mut Ctx) {
                 &r.key,
                 format!(
                     "{} {:?} of {} is already used by {} (line {line}); expected each bus device \
-                     to be opened by one hardware of one executor only",
+                     to be opened by one hardware or gateway only",
                     r.param, r.value, r.owner, first.owner
                 ),
             );
