@@ -1,4 +1,5 @@
-//! Discard accounting shared by the stream scanners, and the framing engine behind the two
+//! What the stream scanners share: the discard accounting, the byte window every scanner
+//! buffers in and the `feed`/`expire_with` loops over it, and the framing engine behind the two
 //! Dynamixel scanners.
 //!
 //! # The accounting invariant
@@ -143,15 +144,137 @@ fn find_header(data: &[u8], header: &[u8], from: usize, limit: usize, flush: boo
     HeaderAt::None
 }
 
-/// Fixed-capacity framing engine shared by the binary scanners.
-pub(crate) struct Engine<const N: usize> {
+/// The fixed-capacity byte window behind every scanner (binary and line): bytes are appended
+/// at the end and consumed from the start; the item last yielded stays in place until the next
+/// call (it is borrowed from here), and `expire` holds until the next `push`.
+pub(crate) struct Window<const N: usize> {
     buf: [u8; N],
     start: usize,
     end: usize,
-    /// Length of the packet last yielded; it stays in `buf` until the next call.
+    /// Length of the item last yielded.
     pending: usize,
-    max_packet: usize,
     flush: bool,
+}
+
+impl<const N: usize> Window<N> {
+    pub(crate) const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            start: 0,
+            end: 0,
+            pending: 0,
+            flush: false,
+        }
+    }
+
+    /// Drops the item last yielded.
+    pub(crate) fn consume_pending(&mut self) {
+        let n = self.pending;
+        self.pending = 0;
+        self.drop_front(n);
+    }
+
+    /// Copies as many of `data` as fit (compacting first if needed); returns how many.
+    pub(crate) fn push(&mut self, data: &[u8]) -> usize {
+        self.consume_pending();
+        self.flush = false;
+        if self.start > 0 && self.end + data.len() > N {
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+        }
+        let n = data.len().min(N - self.end);
+        self.buf[self.end..self.end + n].copy_from_slice(&data[..n]);
+        self.end += n;
+        n
+    }
+
+    /// No more bytes are coming for what is buffered (until the next `push`).
+    pub(crate) fn expire(&mut self) {
+        self.flush = true;
+    }
+
+    pub(crate) fn flushing(&self) -> bool {
+        self.flush
+    }
+
+    /// The bytes not yet yielded or dropped.
+    pub(crate) fn data(&self) -> &[u8] {
+        &self.buf[self.start..self.end]
+    }
+
+    /// Drops the first `n` buffered bytes (discarded by the scanner).
+    pub(crate) fn drop_front(&mut self, n: usize) {
+        self.start += n;
+        if self.start == self.end {
+            self.start = 0;
+            self.end = 0;
+        }
+    }
+
+    /// Yields the first `n` buffered bytes: their range in the buffer, valid until the next
+    /// call.
+    pub(crate) fn yield_front(&mut self, n: usize) -> core::ops::Range<usize> {
+        self.pending = n;
+        self.start..self.start + n
+    }
+
+    pub(crate) fn buf(&self) -> &[u8; N] {
+        &self.buf
+    }
+
+    pub(crate) fn buf_mut(&mut self) -> &mut [u8; N] {
+        &mut self.buf
+    }
+
+    /// Bytes accepted but not yet yielded or dropped.
+    pub(crate) fn buffered(&self) -> usize {
+        self.end - self.start - self.pending
+    }
+}
+
+/// A scanner seen as a source of items (packets, lines, responses, commands): what the
+/// `feed` loop needs.
+pub(crate) trait Scan {
+    /// What the scanner yields, borrowed from its buffer.
+    type Item<'a>
+    where
+        Self: 'a;
+    /// Copies as many bytes as fit; returns how many were taken.
+    fn push(&mut self, bytes: &[u8]) -> usize;
+    /// The next item, if one is complete.
+    fn next_item(&mut self) -> Option<Self::Item<'_>>;
+    /// No more bytes are coming for what is buffered.
+    fn expire(&mut self);
+}
+
+/// Pushes all of `bytes` into `s`, handing every item completed to `on_item`; a full buffer
+/// is drained before more bytes go in.
+pub(crate) fn feed<S: Scan>(s: &mut S, mut bytes: &[u8], mut on_item: impl FnMut(S::Item<'_>)) {
+    loop {
+        let n = s.push(bytes);
+        bytes = &bytes[n..];
+        while let Some(item) = s.next_item() {
+            on_item(item);
+        }
+        if bytes.is_empty() {
+            return;
+        }
+    }
+}
+
+/// Expires `s`, then hands every item still complete behind what is truncated to `on_item`.
+pub(crate) fn expire_with<S: Scan>(s: &mut S, mut on_item: impl FnMut(S::Item<'_>)) {
+    s.expire();
+    while let Some(item) = s.next_item() {
+        on_item(item);
+    }
+}
+
+/// Fixed-capacity framing engine shared by the binary scanners.
+pub(crate) struct Engine<const N: usize> {
+    win: Window<N>,
+    max_packet: usize,
     garbage_run: bool,
     stats: ScanStats,
 }
@@ -162,12 +285,8 @@ impl<const N: usize> Engine<N> {
     pub(crate) fn new(max_packet: usize, header_len: usize) -> Self {
         let cap = N.saturating_sub(header_len.saturating_sub(1));
         Self {
-            buf: [0; N],
-            start: 0,
-            end: 0,
-            pending: 0,
+            win: Window::new(),
             max_packet: max_packet.min(cap),
-            flush: false,
             garbage_run: false,
             stats: ScanStats::default(),
         }
@@ -182,39 +301,21 @@ impl<const N: usize> Engine<N> {
     }
 
     pub(crate) fn buffered(&self) -> usize {
-        self.end - self.start - self.pending
-    }
-
-    fn consume_pending(&mut self) {
-        self.start += self.pending;
-        self.pending = 0;
-        if self.start == self.end {
-            self.start = 0;
-            self.end = 0;
-        }
+        self.win.buffered()
     }
 
     pub(crate) fn push(&mut self, data: &[u8]) -> usize {
-        self.consume_pending();
-        self.flush = false;
-        if self.start > 0 && self.end + data.len() > N {
-            self.buf.copy_within(self.start..self.end, 0);
-            self.end -= self.start;
-            self.start = 0;
-        }
-        let n = data.len().min(N - self.end);
-        self.buf[self.end..self.end + n].copy_from_slice(&data[..n]);
-        self.end += n;
+        let n = self.win.push(data);
         self.stats.bytes_in += n as u64;
         n
     }
 
     pub(crate) fn expire(&mut self) {
-        self.flush = true;
+        self.win.expire();
     }
 
     pub(crate) fn buf_mut(&mut self) -> &mut [u8; N] {
-        &mut self.buf
+        self.win.buf_mut()
     }
 
     fn discard(&mut self, n: usize, cause: Cause) {
@@ -228,14 +329,14 @@ impl<const N: usize> Engine<N> {
             Cause::Truncated => s.truncated.add(n, true),
         }
         self.garbage_run = cause == Cause::Garbage;
-        self.start += n;
+        self.win.drop_front(n);
     }
 
     /// Rejects the candidate at the head: discards its first `limit` bytes, or fewer if a
     /// complete header starts inside them. Returns false if that cannot be decided yet.
     fn reject<F: Framing>(&mut self, cause: Cause, limit: usize) -> bool {
-        let data = &self.buf[self.start..self.end];
-        let cut = match find_header(data, F::HEADER, 1, limit, self.flush) {
+        let data = self.win.data();
+        let cut = match find_header(data, F::HEADER, 1, limit, self.win.flushing()) {
             HeaderAt::Full(k) => k,
             HeaderAt::Partial(_) => return false,
             HeaderAt::None => limit.min(data.len()),
@@ -246,16 +347,15 @@ impl<const N: usize> Engine<N> {
 
     /// Scans for the next complete, checked packet and returns its range in the buffer.
     pub(crate) fn next_frame<F: Framing>(&mut self) -> Option<core::ops::Range<usize>> {
-        self.consume_pending();
+        self.win.consume_pending();
         loop {
-            let avail = self.end - self.start;
+            let data = self.win.data();
+            let avail = data.len();
             if avail == 0 {
-                self.start = 0;
-                self.end = 0;
                 return None;
             }
-            let data = &self.buf[self.start..self.end];
-            match find_header(data, F::HEADER, 0, avail, self.flush) {
+            let flush = self.win.flushing();
+            match find_header(data, F::HEADER, 0, avail, flush) {
                 HeaderAt::Full(0) | HeaderAt::Partial(0) => {}
                 HeaderAt::Full(i) | HeaderAt::Partial(i) => {
                     self.discard(i, Cause::Garbage);
@@ -267,7 +367,7 @@ impl<const N: usize> Engine<N> {
                 }
             }
             if avail < F::FIELDS_LEN {
-                if self.flush {
+                if flush {
                     self.discard(avail, Cause::Truncated);
                     continue;
                 }
@@ -289,7 +389,7 @@ impl<const N: usize> Engine<N> {
                 Some(t) => t,
             };
             if avail < total {
-                if self.flush {
+                if flush {
                     // Resolved with flush semantics, so this always discards.
                     self.reject::<F>(Cause::Truncated, avail);
                     continue;
@@ -305,8 +405,7 @@ impl<const N: usize> Engine<N> {
             self.stats.packets += 1;
             self.stats.packet_bytes += total as u64;
             self.garbage_run = false;
-            self.pending = total;
-            return Some(self.start..self.start + total);
+            return Some(self.win.yield_front(total));
         }
     }
 }

@@ -2,7 +2,7 @@
 
 use super::packet::{decode_checked, id_is_valid, Packet};
 use super::{crc, HEADER};
-use crate::scan::{Engine, Framing, ScanStats};
+use crate::scan::{self, Engine, Framing, Scan, ScanStats};
 
 struct Dxl2;
 
@@ -92,26 +92,14 @@ impl<const N: usize> Scanner<N> {
     }
 
     /// Pushes all of `bytes`, calling `on_packet` for every packet completed.
-    pub fn feed(&mut self, mut bytes: &[u8], mut on_packet: impl FnMut(Packet<'_>)) {
-        loop {
-            let n = self.push(bytes);
-            bytes = &bytes[n..];
-            while let Some(p) = self.next_packet() {
-                on_packet(p);
-            }
-            if bytes.is_empty() {
-                return;
-            }
-        }
+    pub fn feed(&mut self, bytes: &[u8], on_packet: impl FnMut(Packet<'_>)) {
+        scan::feed(self, bytes, on_packet);
     }
 
     /// [`expire`](Self::expire), then drains: calls `on_packet` for packets still complete
     /// behind truncated ones. The buffer is empty afterwards.
-    pub fn expire_with(&mut self, mut on_packet: impl FnMut(Packet<'_>)) {
-        self.expire();
-        while let Some(p) = self.next_packet() {
-            on_packet(p);
-        }
+    pub fn expire_with(&mut self, on_packet: impl FnMut(Packet<'_>)) {
+        scan::expire_with(self, on_packet);
     }
 
     /// Discard counters since creation.
@@ -122,5 +110,21 @@ impl<const N: usize> Scanner<N> {
     /// Bytes accepted but not yet yielded or discarded.
     pub fn buffered(&self) -> usize {
         self.engine.buffered()
+    }
+}
+
+impl<const N: usize> Scan for Scanner<N> {
+    type Item<'a> = Packet<'a>;
+
+    fn push(&mut self, bytes: &[u8]) -> usize {
+        Scanner::push(self, bytes)
+    }
+
+    fn next_item(&mut self) -> Option<Packet<'_>> {
+        self.next_packet()
+    }
+
+    fn expire(&mut self) {
+        Scanner::expire(self);
     }
 }
