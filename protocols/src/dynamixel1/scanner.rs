@@ -1,7 +1,8 @@
 //! Stream scanner for Protocol 1.0.
 
 use super::packet::{decode_checked, Packet};
-use super::{checksum, HEADER, MAX_PACKET};
+use super::{checksum, HEADER, MAX_DEVICE_ID, MAX_PACKET};
+use crate::dynamixel_common::addressable;
 use crate::scan::{self, Engine, Framing, Scan, ScanStats};
 
 struct Dxl1;
@@ -11,7 +12,7 @@ impl Framing for Dxl1 {
     const FIELDS_LEN: usize = 4;
 
     fn total_len(f: &[u8]) -> Option<usize> {
-        (f[2] != 0xFF && f[3] >= 2).then_some(4 + f[3] as usize)
+        (addressable(f[2], MAX_DEVICE_ID) && f[3] >= 2).then_some(4 + f[3] as usize)
     }
 
     fn check(p: &[u8]) -> bool {
