@@ -187,12 +187,7 @@ impl RegDevice {
     pub fn sample(&mut self, i: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
         let Some(c) = self.table.get(i) else { return };
         let Some(addr) = c.read else { return };
-        let _ = out.push(Request {
-            cred: self.cred,
-            op: Op::Read { addr, len: c.len },
-            tick: ctx.tick,
-            t_request_ns: ctx.now_ns,
-        });
+        let _ = out.push(Request::new(self.cred, Op::Read { addr, len: c.len }, ctx));
     }
 
     /// Records a setpoint (units) for channel `i`; returns the raw value stored.
@@ -215,16 +210,12 @@ impl RegDevice {
             };
             let c = self.table[i];
             let Some(addr) = c.write else { continue };
-            let _ = out.push(Request {
-                cred: self.cred,
-                op: Op::Write {
-                    addr,
-                    len: c.len,
-                    value: c.encode_raw(raw),
-                },
-                tick: ctx.tick,
-                t_request_ns: ctx.now_ns,
-            });
+            let op = Op::Write {
+                addr,
+                len: c.len,
+                value: c.encode_raw(raw),
+            };
+            let _ = out.push(Request::new(self.cred, op, ctx));
         }
     }
 
@@ -264,13 +255,7 @@ impl RegDevice {
                 seen(i, raw);
                 Some(c.to_units(raw))
             });
-            let _ = out.push(Update {
-                channel: i,
-                value: units,
-                fault,
-                tick: reply.tick,
-                t_sample_ns: reply.t_sample_ns,
-            });
+            let _ = out.push(Update::from_reply(reply, i, units, fault));
         }
     }
 
@@ -281,28 +266,20 @@ impl RegDevice {
                 Some((i, goal)) if self.last[i].is_some() => {
                     let raw = self.last[i].unwrap_or(0);
                     let c = self.table[i];
-                    let _ = out.push(Request {
-                        cred: self.cred,
-                        op: Op::Write {
-                            addr: goal,
-                            len: c.len,
-                            value: c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1)),
-                        },
-                        tick: ctx.tick,
-                        t_request_ns: ctx.now_ns,
-                    });
+                    let op = Op::Write {
+                        addr: goal,
+                        len: c.len,
+                        value: c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1)),
+                    };
+                    let _ = out.push(Request::new(self.cred, op, ctx));
                 }
                 // Nothing known to hold: the only safe thing left is to let go.
                 _ => self.safe(SafeAction::TorqueOff, ctx, out),
             },
             SafeAction::TorqueOff => {
                 if let Some((addr, len, value)) = self.torque_off {
-                    let _ = out.push(Request {
-                        cred: self.cred,
-                        op: Op::Write { addr, len, value },
-                        tick: ctx.tick,
-                        t_request_ns: ctx.now_ns,
-                    });
+                    let op = Op::Write { addr, len, value };
+                    let _ = out.push(Request::new(self.cred, op, ctx));
                 }
             }
             SafeAction::Setpoint { channel, value } => {

@@ -55,6 +55,16 @@ impl Waiter {
     fn end(&self) -> u16 {
         self.addr + self.len as u16
     }
+
+    /// The answer that this read went unanswered.
+    fn missing(&self) -> Reply {
+        Reply {
+            cred: self.cred,
+            data: ReplyData::Missing { op: self.op() },
+            tick: self.tick,
+            t_sample_ns: self.t_request_ns,
+        }
+    }
 }
 
 /// One register write waiting for the bus.
@@ -329,12 +339,7 @@ impl Core {
                 return true;
             }
             counters.dropped_requests += 1;
-            let _ = early.push(Reply {
-                cred: w.cred,
-                data: ReplyData::Missing { op: w.op() },
-                tick: w.tick,
-                t_sample_ns: w.t_request_ns,
-            });
+            let _ = early.push(w.missing());
             false
         });
     }
@@ -541,12 +546,7 @@ impl Txn {
                 continue;
             }
             n += 1;
-            let _ = out.push(Reply {
-                cred: w.cred,
-                data: ReplyData::Missing { op: w.op() },
-                tick: w.tick,
-                t_sample_ns: w.t_request_ns,
-            });
+            let _ = out.push(w.missing());
         }
         self.active = false;
         n
