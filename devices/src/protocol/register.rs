@@ -135,6 +135,8 @@ pub(crate) struct Core {
     bus_free_at: u64,
     rr: u8,
     pub counters: ProtocolCounters,
+    /// Valid status packets nobody was waiting for (late, duplicated or foreign).
+    pub unsolicited: u64,
 }
 
 impl Core {
@@ -163,6 +165,7 @@ impl Core {
             bus_free_at: 0,
             rr: 0,
             counters: ProtocolCounters::default(),
+            unsolicited: 0,
         }
     }
 
@@ -419,8 +422,23 @@ impl Core {
             .min_by_key(|x| x.seq)
     }
 
-    /// A status packet from `id`, in wire order. Returns false if nobody was waiting for it.
+    /// A status packet from `id`, in wire order; counted as unsolicited if nobody was waiting
+    /// for it.
     pub fn on_status(
+        &mut self,
+        id: u8,
+        err: StatusErr,
+        data: &[u8],
+        ctx: TickCtx,
+        out: &mut Bounded<Reply>,
+    ) {
+        if !self.match_status(id, err, data, ctx, out) {
+            self.unsolicited += 1;
+        }
+    }
+
+    /// [`on_status`](Self::on_status); false if nobody was waiting for the packet.
+    fn match_status(
         &mut self,
         id: u8,
         err: StatusErr,
