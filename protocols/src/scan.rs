@@ -1,6 +1,6 @@
 //! What the stream scanners share: the discard accounting, the byte window every scanner
-//! buffers in and the `feed`/`expire_with` loops over it, and the framing engine behind the two
-//! Dynamixel scanners.
+//! buffers in and the `feed`/`expire_with` loops over it, and [`PacketScanner`], the scanner of
+//! both Dynamixel protocols (each supplies only its [`Framing`]).
 //!
 //! # The accounting invariant
 //!
@@ -54,7 +54,7 @@ impl Tally {
     }
 }
 
-/// Counters of a binary packet scanner ([`dynamixel2::Scanner`](crate::dynamixel2::Scanner),
+/// Counters of a binary packet scanner ([`PacketScanner`]: [`dynamixel2::Scanner`](crate::dynamixel2::Scanner),
 /// [`dynamixel1::Scanner`](crate::dynamixel1::Scanner)). See the [module docs](self) for the
 /// exact meaning of each cause and the accounting invariant.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -104,16 +104,142 @@ pub(crate) enum Cause {
     Truncated,
 }
 
-/// What a binary protocol tells the engine about its framing.
-pub(crate) trait Framing {
+mod sealed {
+    pub trait Sealed {}
+}
+
+/// What a binary packet protocol tells [`PacketScanner`] about its framing: header, length
+/// field, integrity check and how a checked frame reads. Implemented by
+/// [`Dxl2Framing`](crate::dynamixel2::Dxl2Framing) and
+/// [`Dxl1Framing`](crate::dynamixel1::Dxl1Framing); sealed.
+pub trait Framing: sealed::Sealed + 'static {
+    /// What the scanner yields: a checked packet, borrowed from the scanner's buffer.
+    type Packet<'a>;
     /// The fixed bytes every packet starts with.
     const HEADER: &'static [u8];
     /// How many leading bytes determine the total length (header, ID, length field).
     const FIELDS_LEN: usize;
+    /// The shortest packet the protocol has (wire bytes).
+    const MIN_PACKET: usize;
+    /// The longest packet the protocol can have (wire bytes).
+    const MAX_PACKET: usize;
     /// Total packet length from the first `FIELDS_LEN` bytes, or `None` if a field is invalid.
     fn total_len(fields: &[u8]) -> Option<usize>;
     /// Integrity check over a complete candidate.
     fn check(packet: &[u8]) -> bool;
+    /// Reads a frame whose header, length and integrity were checked (may rewrite it in
+    /// place, e.g. to remove byte stuffing).
+    fn decode(frame: &mut [u8]) -> Self::Packet<'_>;
+}
+
+impl sealed::Sealed for crate::dynamixel1::Dxl1Framing {}
+impl sealed::Sealed for crate::dynamixel2::Dxl2Framing {}
+
+/// Fixed-capacity stream scanner for a binary packet protocol `F`, with discard counters:
+/// bytes in any chunking → integrity-checked packets. `N` is the buffer capacity (at least 16);
+/// the largest packet it yields is `N - (header length - 1)` bytes or the smaller maximum given
+/// to [`with_max_packet`](Self::with_max_packet): a longer candidate counts as `oversize`. It
+/// yields status and instruction packets alike (a simulator scans instructions); ID and
+/// instruction filtering is the caller's business. See the [module docs](self) for the
+/// discard causes and the accounting invariant.
+pub struct PacketScanner<F, const N: usize> {
+    engine: Engine<N>,
+    framing: core::marker::PhantomData<F>,
+}
+
+impl<F: Framing, const N: usize> Default for PacketScanner<F, N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<F: Framing, const N: usize> PacketScanner<F, N> {
+    const MIN_CAPACITY: () = assert!(N >= 16, "scanner capacity must be at least 16 bytes");
+
+    /// A scanner accepting the longest packets the protocol and the buffer allow.
+    pub fn new() -> Self {
+        Self::with_max_packet(F::MAX_PACKET)
+    }
+
+    /// A scanner accepting packets up to `max_packet` wire bytes (clamped to what the
+    /// protocol and the buffer allow). A tight maximum (the longest reply the caller expects)
+    /// makes a corrupted length field cost less.
+    pub fn with_max_packet(max_packet: usize) -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::MIN_CAPACITY;
+        Self {
+            engine: Engine::new(
+                max_packet.clamp(F::MIN_PACKET, F::MAX_PACKET),
+                F::HEADER.len(),
+            ),
+            framing: core::marker::PhantomData,
+        }
+    }
+
+    /// Largest packet (wire bytes) this scanner yields.
+    pub fn max_packet(&self) -> usize {
+        self.engine.max_packet()
+    }
+
+    /// Copies as many bytes as fit into the buffer; returns how many were taken. After
+    /// [`next_packet`](Self::next_packet) has returned `None` at least one byte always fits.
+    pub fn push(&mut self, bytes: &[u8]) -> usize {
+        self.engine.push(bytes)
+    }
+
+    /// The next complete packet whose integrity checked. It borrows the scanner's buffer and
+    /// is consumed by the next call.
+    pub fn next_packet(&mut self) -> Option<F::Packet<'_>> {
+        let range = self.engine.next_frame::<F>()?;
+        Some(F::decode(&mut self.engine.buf_mut()[range]))
+    }
+
+    /// Declares that no more bytes are coming for what is buffered (reply timeout): incomplete
+    /// candidates become `truncated` on the following [`next_packet`](Self::next_packet) calls,
+    /// and any complete packets behind them are still yielded. The next `push` ends this.
+    pub fn expire(&mut self) {
+        self.engine.expire();
+    }
+
+    /// Pushes all of `bytes`, calling `on_packet` for every packet completed.
+    pub fn feed(&mut self, bytes: &[u8], on_packet: impl FnMut(F::Packet<'_>)) {
+        feed(self, bytes, on_packet);
+    }
+
+    /// [`expire`](Self::expire), then drains: calls `on_packet` for packets still complete
+    /// behind truncated ones. The buffer is empty afterwards.
+    pub fn expire_with(&mut self, on_packet: impl FnMut(F::Packet<'_>)) {
+        expire_with(self, on_packet);
+    }
+
+    /// Discard counters since creation.
+    pub fn stats(&self) -> &ScanStats {
+        self.engine.stats()
+    }
+
+    /// Bytes accepted but not yet yielded or discarded.
+    pub fn buffered(&self) -> usize {
+        self.engine.buffered()
+    }
+}
+
+impl<F: Framing, const N: usize> Scan for PacketScanner<F, N> {
+    type Item<'a>
+        = F::Packet<'a>
+    where
+        Self: 'a;
+
+    fn push(&mut self, bytes: &[u8]) -> usize {
+        PacketScanner::push(self, bytes)
+    }
+
+    fn next_item(&mut self) -> Option<F::Packet<'_>> {
+        self.next_packet()
+    }
+
+    fn expire(&mut self) {
+        PacketScanner::expire(self);
+    }
 }
 
 /// Where a header could start.

@@ -18,7 +18,7 @@ pub use encode::{
     action, bulk_read, ping, read, reg_write, reset, status, sync_write, write, BulkReadEntry,
 };
 pub use packet::{parse, ErrorBits, Packet, ParseError, Status};
-pub use scanner::Scanner;
+pub use scanner::{Dxl1Framing, Scanner};
 
 /// The two bytes every packet starts with.
 pub const HEADER: [u8; 2] = [0xFF, 0xFF];

@@ -36,7 +36,7 @@ pub use packet::{
     StatusError,
 };
 pub use request::{BulkWriteEntries, Request, RequestError};
-pub use scanner::Scanner;
+pub use scanner::{Dxl2Framing, Scanner};
 
 /// The four bytes every packet starts with (`FF FF FD` plus the reserved `00`).
 pub const HEADER: [u8; 4] = [0xFF, 0xFF, 0xFD, 0x00];
