@@ -3,9 +3,8 @@
 //! servos without it (AX), one READ per bus window, round robin over the devices.
 
 use conductor_protocols::dynamixel1::{
-    self as dxl, BulkReadEntry, ErrorBits, Packet, Scanner, Status,
+    self as dxl, BulkReadEntry, Dxl1Framing, ErrorBits, Packet, Status,
 };
-use conductor_protocols::scan::ScanStats;
 
 use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
 use super::register_stage::{Dialect, ReadTxn, Stage};
@@ -24,7 +23,7 @@ pub enum Dxl1ReadMode {
 
 /// Dynamixel 1.0 protocol stage. Word = byte.
 pub struct Dxl1Protocol {
-    stage: Stage<Dxl1>,
+    stage: Stage<Dxl1, 512>,
 }
 
 impl std::fmt::Debug for Dxl1Protocol {
@@ -38,7 +37,6 @@ impl std::fmt::Debug for Dxl1Protocol {
 /// What Protocol 1.0 adds to the register-bus stage.
 struct Dxl1 {
     mode: Dxl1ReadMode,
-    scanner: Box<Scanner<512>>,
 }
 
 /// Bits meaning the instruction was not carried out (its data is not to be trusted).
@@ -48,10 +46,7 @@ impl Dxl1Protocol {
     /// A stage for up to `devices` servos and `in_flight` read requests.
     pub fn new(timing: Timing, mode: Dxl1ReadMode, devices: usize, in_flight: usize) -> Self {
         let devices = devices.clamp(1, 254);
-        let dialect = Dxl1 {
-            mode,
-            scanner: Box::new(Scanner::new()),
-        };
+        let dialect = Dxl1 { mode };
         Self {
             stage: Stage::new(
                 dialect,
@@ -66,6 +61,8 @@ impl Dxl1Protocol {
 }
 
 impl Dialect for Dxl1 {
+    type Framing = Dxl1Framing;
+
     fn single(&self) -> bool {
         self.mode == Dxl1ReadMode::Single
     }
@@ -112,34 +109,14 @@ impl Dialect for Dxl1 {
         })
     }
 
-    fn scan(
-        &mut self,
-        words: Option<&[u8]>,
-        core: &mut Core,
-        ctx: TickCtx,
-        out: &mut Bounded<Reply>,
-    ) {
-        let on_packet = |p: Packet<'_>| {
-            let s = Status::from_packet(&p);
-            let err = StatusErr {
-                failed: s.error.0 & FAILED != 0,
-                alert: s.error.0 & !FAILED != 0,
-                code: s.error.0,
-            };
-            core.on_status(s.id, err, s.data, ctx, out);
+    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, out: &mut Bounded<Reply>) {
+        let s = Status::from_packet(&p);
+        let err = StatusErr {
+            failed: s.error.0 & FAILED != 0,
+            alert: s.error.0 & !FAILED != 0,
+            code: s.error.0,
         };
-        match words {
-            Some(w) => self.scanner.feed(w, on_packet),
-            None => self.scanner.expire_with(on_packet),
-        }
-    }
-
-    fn scan_stats(&self) -> &ScanStats {
-        self.scanner.stats()
-    }
-
-    fn buffered(&self) -> usize {
-        self.scanner.buffered()
+        core.on_status(s.id, err, s.data, out);
     }
 }
 
@@ -150,8 +127,8 @@ impl Protocol for Dxl1Protocol {
         self.stage.encode(requests, out, ctx);
     }
 
-    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, ctx: TickCtx) {
-        self.stage.decode(words, out, ctx);
+    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, _ctx: TickCtx) {
+        self.stage.decode(words, out);
     }
 
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
@@ -169,12 +146,7 @@ mod tests {
     use crate::message::{Credential, Op, ReplyData};
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
-        Request {
-            cred: Credential::id(id),
-            op,
-            tick,
-            t_request_ns: tick * 1_000_000,
-        }
+        Request::new(Credential::id(id), op, ctx(tick))
     }
 
     fn ctx(tick: u64) -> TickCtx {

@@ -3,7 +3,7 @@
 //! devices read different spans), and matches status packets back to the requests.
 
 use conductor_protocols::dynamixel2::{
-    self as dxl, BulkReadEntry, FastReply, Packet, Scanner, Status,
+    self as dxl, BulkReadEntry, Dxl2Framing, FastReply, Packet, Status,
 };
 
 use conductor_protocols::scan::ScanStats;
@@ -28,7 +28,7 @@ const MAX_PACKET: usize = 1024;
 
 /// Dynamixel 2.0 protocol stage. Word = byte.
 pub struct Dxl2Protocol {
-    stage: Stage<Dxl2>,
+    stage: Stage<Dxl2, MAX_PACKET>,
 }
 
 impl std::fmt::Debug for Dxl2Protocol {
@@ -43,7 +43,6 @@ impl std::fmt::Debug for Dxl2Protocol {
 /// What Protocol 2.0 adds to the register-bus stage.
 struct Dxl2 {
     mode: Dxl2ReadMode,
-    scanner: Box<Scanner<MAX_PACKET>>,
     bulk: Vec<BulkReadEntry>,
     ids: Vec<u8>,
     /// Entry lengths of the open fast read, to split its combined reply.
@@ -56,7 +55,6 @@ impl Dxl2Protocol {
         let devices = devices.clamp(1, 253);
         let dialect = Dxl2 {
             mode,
-            scanner: Box::new(Scanner::new()),
             bulk: Vec::with_capacity(devices),
             ids: Vec::with_capacity(devices),
             lens: Vec::with_capacity(devices),
@@ -80,7 +78,7 @@ impl Dxl2Protocol {
 
     /// The scanner's discard statistics.
     pub fn scan_stats(&self) -> ScanStats {
-        *self.stage.dialect().scan_stats()
+        *self.stage.scan_stats()
     }
 
     /// Valid status packets nobody was waiting for (late, duplicated or foreign).
@@ -98,46 +96,9 @@ fn status_err(e: dxl::ErrorByte) -> StatusErr {
     }
 }
 
-fn handle_packet(
-    core: &mut Core,
-    lens: &mut Vec<usize>,
-    p: Packet<'_>,
-    ctx: TickCtx,
-    out: &mut Bounded<Reply>,
-) {
-    if !p.is_status() {
-        // An instruction packet: the echo of an adapter that hears itself. Not ours to answer.
-        return;
-    }
-    if p.id == dxl::BROADCAST_ID {
-        let Ok(fr) = FastReply::from_packet(&p) else {
-            core.counters.rejected_packets += 1;
-            return;
-        };
-        if !core.fast_lens(lens) {
-            core.unsolicited += 1;
-            return;
-        }
-        for s in fr.slices(lens.iter().copied()) {
-            match s {
-                Ok(s) => core.on_status(s.id, status_err(s.error), s.data, ctx, out),
-                Err(_) => {
-                    // The slices after a bad embedded CRC cannot be trusted; their requests
-                    // expire as missing.
-                    core.counters.rejected_packets += 1;
-                    break;
-                }
-            }
-        }
-        return;
-    }
-    match Status::from_packet(&p) {
-        Ok(s) => core.on_status(s.id, status_err(s.error), s.data, ctx, out),
-        Err(_) => core.counters.rejected_packets += 1,
-    }
-}
-
 impl Dialect for Dxl2 {
+    type Framing = Dxl2Framing;
+
     fn single(&self) -> bool {
         false
     }
@@ -198,27 +159,37 @@ impl Dialect for Dxl2 {
         })
     }
 
-    fn scan(
-        &mut self,
-        words: Option<&[u8]>,
-        core: &mut Core,
-        ctx: TickCtx,
-        out: &mut Bounded<Reply>,
-    ) {
-        let lens = &mut self.lens;
-        let on_packet = |p: Packet<'_>| handle_packet(core, lens, p, ctx, out);
-        match words {
-            Some(w) => self.scanner.feed(w, on_packet),
-            None => self.scanner.expire_with(on_packet),
+    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, out: &mut Bounded<Reply>) {
+        if !p.is_status() {
+            // An instruction packet: the echo of an adapter that hears itself. Not ours to answer.
+            return;
         }
-    }
-
-    fn scan_stats(&self) -> &ScanStats {
-        self.scanner.stats()
-    }
-
-    fn buffered(&self) -> usize {
-        self.scanner.buffered()
+        if p.id == dxl::BROADCAST_ID {
+            let Ok(fr) = FastReply::from_packet(&p) else {
+                core.counters.rejected_packets += 1;
+                return;
+            };
+            if !core.fast_lens(&mut self.lens) {
+                core.unsolicited += 1;
+                return;
+            }
+            for s in fr.slices(self.lens.iter().copied()) {
+                match s {
+                    Ok(s) => core.on_status(s.id, status_err(s.error), s.data, out),
+                    Err(_) => {
+                        // The slices after a bad embedded CRC cannot be trusted; their requests
+                        // expire as missing.
+                        core.counters.rejected_packets += 1;
+                        break;
+                    }
+                }
+            }
+            return;
+        }
+        match Status::from_packet(&p) {
+            Ok(s) => core.on_status(s.id, status_err(s.error), s.data, out),
+            Err(_) => core.counters.rejected_packets += 1,
+        }
     }
 }
 
@@ -229,8 +200,8 @@ impl Protocol for Dxl2Protocol {
         self.stage.encode(requests, out, ctx);
     }
 
-    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, ctx: TickCtx) {
-        self.stage.decode(words, out, ctx);
+    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, _ctx: TickCtx) {
+        self.stage.decode(words, out);
     }
 
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
@@ -248,12 +219,7 @@ mod tests {
     use crate::message::{Credential, Op, ReplyData};
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
-        Request {
-            cred: Credential::id(id),
-            op,
-            tick,
-            t_request_ns: tick * 100_000,
-        }
+        Request::new(Credential::id(id), op, ctx(tick))
     }
 
     fn ctx(tick: u64) -> TickCtx {

@@ -16,7 +16,7 @@
 
 use crate::message::{Credential, Op, Reply, ReplyData, Request};
 use crate::queue::Bounded;
-use crate::stage::{ProtocolCounters, TickCtx};
+use crate::stage::ProtocolCounters;
 
 /// Nanoseconds to send `bytes` 8N1 bytes (10 bits each) at `baud`.
 pub fn wire_ns(bytes: usize, baud: u32) -> u64 {
@@ -424,15 +424,8 @@ impl Core {
 
     /// A status packet from `id`, in wire order; counted as unsolicited if nobody was waiting
     /// for it.
-    pub fn on_status(
-        &mut self,
-        id: u8,
-        err: StatusErr,
-        data: &[u8],
-        ctx: TickCtx,
-        out: &mut Bounded<Reply>,
-    ) {
-        if !self.match_status(id, err, data, ctx, out) {
+    pub fn on_status(&mut self, id: u8, err: StatusErr, data: &[u8], out: &mut Bounded<Reply>) {
+        if !self.match_status(id, err, data, out) {
             self.unsolicited += 1;
         }
     }
@@ -443,7 +436,6 @@ impl Core {
         id: u8,
         err: StatusErr,
         data: &[u8],
-        ctx: TickCtx,
         out: &mut Bounded<Reply>,
     ) -> bool {
         // The oldest open transaction still expecting `id`.
@@ -518,7 +510,6 @@ impl Core {
         if x.entries.iter().all(|e| e.done) {
             x.active = false;
         }
-        let _ = ctx;
         true
     }
 

@@ -2,9 +2,9 @@
 //! each tick it queues the requests in the [`Core`], sends the queued writes as one SYNC WRITE
 //! per register and the queued reads as one read transaction, and hands every status packet the
 //! scanner finds back to the core. A [`Dialect`] supplies what differs: the packet encoders,
-//! the read instruction, the scanner and how a status packet's error byte reads.
+//! the read instruction, the packet framing and how a status packet reads.
 
-use conductor_protocols::scan::ScanStats;
+use conductor_protocols::scan::{Framing, PacketScanner, ScanStats};
 
 use super::register::{Core, Entry, ReadShape, Timing};
 use crate::message::{Reply, Request};
@@ -26,6 +26,9 @@ pub(crate) struct ReadTxn {
 
 /// What one register-bus protocol adds to the shared stage.
 pub(crate) trait Dialect {
+    /// The packets the stage scans for.
+    type Framing: Framing;
+
     /// Reads go one device per transaction (round robin) instead of all at once.
     fn single(&self) -> bool;
 
@@ -43,35 +46,27 @@ pub(crate) trait Dialect {
     /// the protocol cannot carry it.
     fn read(&mut self, buf: &mut [u8], entries: &[Entry], shape: ReadShape) -> Option<ReadTxn>;
 
-    /// Scans `words` (with `None`: the line has gone quiet, so the scanner expires) and hands
-    /// every status packet to `core`.
-    fn scan(
+    /// Hands a packet the scanner found to `core` (status packets) or counts it.
+    fn on_packet(
         &mut self,
-        words: Option<&[u8]>,
         core: &mut Core,
-        ctx: TickCtx,
+        packet: <Self::Framing as Framing>::Packet<'_>,
         out: &mut Bounded<Reply>,
     );
-
-    /// The scanner's discard counters.
-    fn scan_stats(&self) -> &ScanStats;
-
-    /// Bytes the scanner holds, not yet yielded or discarded.
-    fn buffered(&self) -> usize;
 }
 
-/// A register-bus protocol stage over dialect `D`.
-#[derive(Debug)]
-pub(crate) struct Stage<D> {
+/// A register-bus protocol stage over dialect `D`, scanning with an `N`-byte buffer.
+pub(crate) struct Stage<D: Dialect, const N: usize> {
     core: Core,
     dialect: D,
+    scanner: Box<PacketScanner<D::Framing, N>>,
     pkt: Vec<u8>,
     group: Vec<(u8, i64)>,
     values: Vec<(u8, [u8; 4])>,
     entries: Vec<Entry>,
 }
 
-impl<D: Dialect> Stage<D> {
+impl<D: Dialect, const N: usize> Stage<D, N> {
     /// Room for `devices` devices (IDs up to `max_id`), `in_flight` read requests and packets
     /// of `max_packet` bytes.
     pub fn new(
@@ -85,6 +80,7 @@ impl<D: Dialect> Stage<D> {
         Self {
             core: Core::new(timing, max_id, devices, in_flight),
             dialect,
+            scanner: Box::new(PacketScanner::new()),
             pkt: vec![0; max_packet],
             group: Vec::with_capacity(devices),
             values: Vec::with_capacity(devices),
@@ -94,6 +90,11 @@ impl<D: Dialect> Stage<D> {
 
     pub fn dialect(&self) -> &D {
         &self.dialect
+    }
+
+    /// The scanner's discard counters.
+    pub fn scan_stats(&self) -> &ScanStats {
+        self.scanner.stats()
     }
 
     /// Valid status packets nobody was waiting for.
@@ -154,23 +155,35 @@ impl<D: Dialect> Stage<D> {
         self.entries = entries;
     }
 
-    pub fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, ctx: TickCtx) {
+    pub fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>) {
         self.core.counters.words_in += words.len() as u64;
-        self.dialect.scan(Some(words), &mut self.core, ctx, out);
+        let Self {
+            core,
+            dialect,
+            scanner,
+            ..
+        } = self;
+        scanner.feed(words, |p| dialect.on_packet(core, p, out));
     }
 
     pub fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
         let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
-        if due || (!self.core.any_open() && self.dialect.buffered() > 0) {
+        if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
             // The line is quiet for the oldest transaction: a partial packet will never
             // complete. Packets complete behind it still count.
-            self.dialect.scan(None, &mut self.core, ctx, out);
+            let Self {
+                core,
+                dialect,
+                scanner,
+                ..
+            } = self;
+            scanner.expire_with(|p| dialect.on_packet(core, p, out));
         }
         self.core.expire(ctx.now_ns, out);
     }
 
     pub fn counters(&self) -> ProtocolCounters {
-        let s = self.dialect.scan_stats();
+        let s = self.scanner.stats();
         let mut c = self.core.counters;
         c.discarded_words = s.discarded_bytes();
         c.rejected_packets += s.rejected_packets() + self.core.unsolicited;
