@@ -1,6 +1,8 @@
 //! What flows between the stages: [`Request`]s downstream, [`Reply`]s upstream, and the
 //! [`Update`]s a device hands back to the state stage.
 
+use crate::stage::TickCtx;
+
 /// The identity of a device on its bus, which the Device stage tags on every request and the
 /// Protocol stage reconstructs from every reply (the thesis' "credential").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Default)]
@@ -87,6 +89,18 @@ pub struct Request {
     pub t_request_ns: u64,
 }
 
+impl Request {
+    /// `op` for the device at `cred`, issued now (the tick and time of `ctx`).
+    pub fn new(cred: Credential, op: Op, ctx: TickCtx) -> Self {
+        Self {
+            cred,
+            op,
+            tick: ctx.tick,
+            t_request_ns: ctx.now_ns,
+        }
+    }
+}
+
 /// What came back.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum ReplyData {
@@ -151,4 +165,17 @@ pub struct Update {
     pub tick: u64,
     /// Sample time.
     pub t_sample_ns: u64,
+}
+
+impl Update {
+    /// The update of `channel` that `reply` brings (its tick and sample time).
+    pub fn from_reply(reply: &Reply, channel: usize, value: Option<f64>, fault: bool) -> Self {
+        Self {
+            channel,
+            value,
+            fault,
+            tick: reply.tick,
+            t_sample_ns: reply.t_sample_ns,
+        }
+    }
 }

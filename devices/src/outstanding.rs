@@ -1,6 +1,6 @@
 //! Requests awaiting replies, so a protocol can report the ones that never come.
 
-use crate::message::{Credential, Op, Reply, ReplyData};
+use crate::message::{Credential, Op, Reply, ReplyData, Request};
 use crate::queue::Bounded;
 
 /// One request in flight.
@@ -16,6 +16,29 @@ pub struct Pending {
     pub t_request_ns: u64,
     /// When to give up (CLOCK_MONOTONIC ns).
     pub deadline_ns: u64,
+}
+
+impl Pending {
+    /// Request `r`, given up at `deadline_ns`.
+    pub fn new(r: &Request, deadline_ns: u64) -> Self {
+        Self {
+            cred: r.cred,
+            op: r.op,
+            tick: r.tick,
+            t_request_ns: r.t_request_ns,
+            deadline_ns,
+        }
+    }
+
+    /// The reply that answers this request with `data` (sampled when it was asked).
+    pub fn reply(&self, data: ReplyData) -> Reply {
+        Reply {
+            cred: self.cred,
+            data,
+            tick: self.tick,
+            t_sample_ns: self.t_request_ns,
+        }
+    }
 }
 
 /// Fixed-capacity table of requests in flight.
@@ -56,12 +79,7 @@ impl Outstanding {
                 return true;
             }
             expired += 1;
-            let _ = out.push(Reply {
-                cred: p.cred,
-                data: ReplyData::Missing { op: p.op },
-                tick: p.tick,
-                t_sample_ns: p.t_request_ns,
-            });
+            let _ = out.push(p.reply(ReplyData::Missing { op: p.op }));
             false
         });
         expired

@@ -106,6 +106,14 @@ impl<T: Copy> Bounded<T> {
         }
         n
     }
+
+    /// Moves the oldest items into `out`, as many as fit; returns how many.
+    pub fn pop_into(&mut self, out: &mut [T]) -> usize {
+        let n = out.len().min(self.items.len());
+        out[..n].copy_from_slice(&self.items[..n]);
+        self.consume(n);
+        n
+    }
 }
 
 #[cfg(test)]
@@ -126,5 +134,18 @@ mod tests {
         assert_eq!(q.extend_from_slice(&[5, 6, 7]), 2);
         assert_eq!(q.as_slice(), [2, 5, 6]);
         assert_eq!(q.items.capacity(), 3, "storage was never reallocated");
+    }
+
+    #[test]
+    fn pop_into_moves_the_oldest_that_fit() {
+        let mut q = Bounded::with_capacity(4);
+        q.extend_from_slice(&[1, 2, 3]);
+        let mut out = [0; 2];
+        assert_eq!(q.pop_into(&mut out), 2);
+        assert_eq!((out, q.as_slice()), ([1, 2], &[3][..]));
+        let mut out = [0; 4];
+        assert_eq!(q.pop_into(&mut out), 1);
+        assert_eq!(out, [3, 0, 0, 0]);
+        assert!(q.is_empty());
     }
 }

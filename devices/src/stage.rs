@@ -111,6 +111,32 @@ pub struct Channel {
     pub writable: bool,
 }
 
+impl Channel {
+    /// A channel that is sampled and accepts setpoints.
+    pub const fn read_write(name: &'static str, units: &'static str) -> Self {
+        Self::new(name, units, true, true)
+    }
+
+    /// A channel that is only sampled.
+    pub const fn read_only(name: &'static str, units: &'static str) -> Self {
+        Self::new(name, units, true, false)
+    }
+
+    /// A channel that only accepts setpoints.
+    pub const fn write_only(name: &'static str, units: &'static str) -> Self {
+        Self::new(name, units, false, true)
+    }
+
+    const fn new(name: &'static str, units: &'static str, readable: bool, writable: bool) -> Self {
+        Self {
+            name,
+            units,
+            readable,
+            writable,
+        }
+    }
+}
+
 /// What a device does when commands stop (watchdog) or the executor shuts down.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum SafeAction {

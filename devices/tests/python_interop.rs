@@ -14,6 +14,9 @@ use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_protocols::slcan::Dialect;
 
+mod common;
+use common::field;
+
 fn run_script(script: &str, args: &[&str]) -> String {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/python")
@@ -30,22 +33,6 @@ fn run_script(script: &str, args: &[&str]) -> String {
         String::from_utf8_lossy(&out.stderr)
     );
     String::from_utf8(out.stdout).unwrap()
-}
-
-/// The value of `"key": value` in a flat JSON line (numbers and number lists only).
-fn field(json: &str, key: &str) -> String {
-    let start = json
-        .find(&format!("\"{key}\": "))
-        .unwrap_or_else(|| panic!("{key} in {json}"))
-        + key.len()
-        + 4;
-    let rest = &json[start..];
-    let end = if rest.starts_with('[') {
-        rest.find(']').unwrap() + 1
-    } else {
-        rest.find([',', '}']).unwrap()
-    };
-    rest[..end].to_string()
 }
 
 fn numbers(s: &str) -> Vec<f64> {

@@ -13,8 +13,13 @@ use conductor_devices::hw::{SerialHardware, SerialOptions, SlcanHardware, SlcanO
 use conductor_devices::protocol::{
     mit_limits, CanMotorProtocol, Dxl2Protocol, Dxl2ReadMode, Timing,
 };
-use conductor_devices::{Bounded, Credential, Device, Link, LinkOf, Reply, Request, TickCtx};
+use conductor_devices::{
+    Bounded, Credential, Device, Link, LinkOf, Reply, Request, TickCtx, Update,
+};
 use conductor_protocols::can::CanFrame;
+
+mod common;
+use common::field;
 
 struct Sim {
     child: Child,
@@ -78,23 +83,66 @@ impl Drop for Sim {
     }
 }
 
-fn field(json: &str, key: &str) -> String {
-    let start = json.find(&format!("\"{key}\": ")).unwrap() + key.len() + 4;
-    let rest = &json[start..];
-    let end = if rest.starts_with('[') {
-        rest.find(']').unwrap() + 1
-    } else {
-        rest.find([',', '}']).unwrap()
-    };
-    rest[..end].to_string()
-}
-
 fn num(json: &str, key: &str) -> u64 {
     field(json, key).parse().unwrap()
 }
 
 fn now_ns(t0: Instant) -> u64 {
     t0.elapsed().as_nanos() as u64
+}
+
+/// Runs `ticks` ticks of `period_ns` in real time, as the executor would: every device samples
+/// `channel` and is sent `goal(i)` on it, the link carries the requests, and each reply goes to
+/// its device (credential ID `i + 1`), whose updates `on_update(i, update)` sees. Replies from
+/// other nodes go to `on_other`.
+#[allow(clippy::too_many_arguments)]
+fn drive<D: Device>(
+    link: &mut impl Link,
+    devs: &mut [D],
+    ticks: u64,
+    period_ns: u64,
+    channel: usize,
+    goal: impl Fn(usize) -> f64,
+    mut on_update: impl FnMut(usize, &Update),
+    mut on_other: impl FnMut(&Reply),
+) {
+    let mut reqs = Bounded::<Request>::with_capacity(64);
+    let mut replies = Bounded::<Reply>::with_capacity(64);
+    let mut ups = Bounded::with_capacity(64);
+    let t0 = Instant::now();
+    for k in 0..ticks {
+        let due = k * period_ns;
+        let now = now_ns(t0);
+        if due > now {
+            std::thread::sleep(Duration::from_nanos(due - now));
+        }
+        let ctx = TickCtx {
+            tick: k,
+            now_ns: now_ns(t0),
+        };
+        reqs.clear();
+        for (i, d) in devs.iter_mut().enumerate() {
+            d.sample(channel, ctx, &mut reqs);
+            d.write(channel, goal(i), ctx);
+            d.flush(ctx, &mut reqs);
+        }
+        link.encode(reqs.as_slice(), ctx);
+        link.exchange(ctx).unwrap();
+        replies.clear();
+        link.decode(&mut replies, ctx);
+        for r in replies.as_slice() {
+            let i = r.cred.id as usize - 1;
+            let Some(d) = devs.get_mut(i) else {
+                on_other(r);
+                continue;
+            };
+            ups.clear();
+            d.reply(r, &mut ups);
+            for u in ups.as_slice() {
+                on_update(i, u);
+            }
+        }
+    }
 }
 
 #[test]
@@ -114,48 +162,24 @@ fn dynamixel_process_over_a_pty_at_250_hz() {
     let mut devs: Vec<DynamixelX> = (1..=6)
         .map(|id| DynamixelX::new(Credential::id(id), DxlXConfig::default()))
         .collect();
-    let mut reqs = Bounded::<Request>::with_capacity(64);
-    let mut replies = Bounded::<Reply>::with_capacity(64);
-    let mut ups = Bounded::with_capacity(64);
-    let t0 = Instant::now();
-    let period = 4_000_000u64;
     let (mut values, mut stale) = (0u32, 0u32);
     let mut last = [0.0f64; 6];
-    for k in 0..250u64 {
-        let due = k * period;
-        let now = now_ns(t0);
-        if due > now {
-            std::thread::sleep(Duration::from_nanos(due - now));
-        }
-        let ctx = TickCtx {
-            tick: k,
-            now_ns: now_ns(t0),
-        };
-        reqs.clear();
-        for d in devs.iter_mut() {
-            d.sample(x_channel::POSITION, ctx, &mut reqs);
-            d.write(x_channel::POSITION, 0.25, ctx);
-            d.flush(ctx, &mut reqs);
-        }
-        link.encode(reqs.as_slice(), ctx);
-        link.exchange(ctx).unwrap();
-        replies.clear();
-        link.decode(&mut replies, ctx);
-        for r in replies.as_slice() {
-            let i = (r.cred.id - 1) as usize;
-            ups.clear();
-            devs[i].reply(r, &mut ups);
-            for u in ups.as_slice() {
-                match u.value {
-                    Some(v) => {
-                        values += 1;
-                        last[i] = v;
-                    }
-                    None => stale += 1,
-                }
+    drive(
+        &mut link,
+        &mut devs,
+        250,
+        4_000_000,
+        x_channel::POSITION,
+        |_| 0.25,
+        |i, u| match u.value {
+            Some(v) => {
+                values += 1;
+                last[i] = v;
             }
-        }
-    }
+            None => stale += 1,
+        },
+        |r| panic!("a reply from a node that was not asked: {r:?}"),
+    );
     // Let the last tick's bytes reach the simulator before comparing counts.
     std::thread::sleep(Duration::from_millis(50));
     let s = sim.stats();
@@ -198,56 +222,29 @@ fn slcan_process_with_three_mit_motors() {
     let mut devs: Vec<MitMotor> = (1..=3)
         .map(|id| MitMotor::new(Credential::id(id), 20.0, 1.0, true))
         .collect();
-    let mut reqs = Bounded::<Request>::with_capacity(64);
-    let mut replies = Bounded::<Reply>::with_capacity(64);
-    let mut ups = Bounded::with_capacity(64);
-    let t0 = Instant::now();
-    let period = 2_000_000u64;
     let (mut values, mut stale) = (0u64, 0u64);
     let mut total_heartbeats = 0;
     let mut last = [0.0f64; 3];
-    for k in 0..500u64 {
-        let due = k * period;
-        let now = now_ns(t0);
-        if due > now {
-            std::thread::sleep(Duration::from_nanos(due - now));
-        }
-        let ctx = TickCtx {
-            tick: k,
-            now_ns: now_ns(t0),
-        };
-        reqs.clear();
-        for (i, d) in devs.iter_mut().enumerate() {
-            d.sample(mit_channel::POSITION, ctx, &mut reqs);
-            d.write(mit_channel::POSITION, 0.4 * (i as f64 + 1.0), ctx);
-            d.flush(ctx, &mut reqs);
-        }
-        link.encode(reqs.as_slice(), ctx);
-        link.exchange(ctx).unwrap();
-        replies.clear();
-        link.decode(&mut replies, ctx);
-        let mut heartbeats = 0;
-        for r in replies.as_slice() {
-            // Node 4 is an ODrive: its cyclic heartbeat arrives unasked.
-            if r.cred.id == 4 {
-                heartbeats += 1;
-                continue;
+    drive(
+        &mut link,
+        &mut devs,
+        500,
+        2_000_000,
+        mit_channel::POSITION,
+        |i| 0.4 * (i as f64 + 1.0),
+        |i, u| match u.value {
+            Some(v) => {
+                values += 1;
+                last[i] = v;
             }
-            let i = (r.cred.id - 1) as usize;
-            ups.clear();
-            devs[i].reply(r, &mut ups);
-            for u in ups.as_slice() {
-                match u.value {
-                    Some(v) => {
-                        values += 1;
-                        last[i] = v;
-                    }
-                    None => stale += 1,
-                }
-            }
-        }
-        total_heartbeats += heartbeats;
-    }
+            None => stale += 1,
+        },
+        // Node 4 is an ODrive: its cyclic heartbeat arrives unasked.
+        |r| {
+            assert_eq!(r.cred.id, 4, "{r:?}");
+            total_heartbeats += 1;
+        },
+    );
     // 1 s of 100 ms heartbeats.
     assert!((8..=12).contains(&total_heartbeats), "{total_heartbeats}");
     std::thread::sleep(Duration::from_millis(50));
@@ -308,40 +305,21 @@ fn dynamixel_over_udp() {
     let mut devs: Vec<DynamixelX> = (1..=3)
         .map(|id| DynamixelX::new(Credential::id(id), DxlXConfig::default()))
         .collect();
-    let mut reqs = Bounded::<Request>::with_capacity(16);
-    let mut replies = Bounded::<Reply>::with_capacity(16);
-    let mut ups = Bounded::with_capacity(16);
-    let t0 = Instant::now();
     let mut last = [None; 3];
-    for k in 0..100u64 {
-        let due = k * 4_000_000;
-        let now = now_ns(t0);
-        if due > now {
-            std::thread::sleep(Duration::from_nanos(due - now));
-        }
-        let ctx = TickCtx {
-            tick: k,
-            now_ns: now_ns(t0),
-        };
-        reqs.clear();
-        for d in devs.iter_mut() {
-            d.sample(x_channel::POSITION, ctx, &mut reqs);
-            d.write(x_channel::POSITION, -0.5, ctx);
-            d.flush(ctx, &mut reqs);
-        }
-        link.encode(reqs.as_slice(), ctx);
-        link.exchange(ctx).unwrap();
-        replies.clear();
-        link.decode(&mut replies, ctx);
-        for r in replies.as_slice() {
-            let i = (r.cred.id - 1) as usize;
-            ups.clear();
-            devs[i].reply(r, &mut ups);
-            if let Some(u) = ups.as_slice().iter().find(|u| u.value.is_some()) {
+    drive(
+        &mut link,
+        &mut devs,
+        100,
+        4_000_000,
+        x_channel::POSITION,
+        |_| -0.5,
+        |i, u| {
+            if u.value.is_some() {
                 last[i] = u.value;
             }
-        }
-    }
+        },
+        |r| panic!("a reply from a node that was not asked: {r:?}"),
+    );
     std::thread::sleep(Duration::from_millis(50));
     let s = sim.sim().stats();
     let c = link.counters();

@@ -28,6 +28,7 @@ extern crate std;
 pub mod can;
 pub mod dynamixel1;
 pub mod dynamixel2;
+mod dynamixel_common;
 pub mod mit_can;
 pub mod odrive_can;
 pub mod scan;

@@ -1,5 +1,6 @@
-//! Discard accounting shared by the stream scanners, and the framing engine behind the two
-//! Dynamixel scanners.
+//! What the stream scanners share: the discard accounting, the byte window every scanner
+//! buffers in and the `feed`/`expire_with` loops over it, and [`PacketScanner`], the scanner of
+//! both Dynamixel protocols (each supplies only its [`Framing`]).
 //!
 //! # The accounting invariant
 //!
@@ -53,7 +54,7 @@ impl Tally {
     }
 }
 
-/// Counters of a binary packet scanner ([`dynamixel2::Scanner`](crate::dynamixel2::Scanner),
+/// Counters of a binary packet scanner ([`PacketScanner`]: [`dynamixel2::Scanner`](crate::dynamixel2::Scanner),
 /// [`dynamixel1::Scanner`](crate::dynamixel1::Scanner)). See the [module docs](self) for the
 /// exact meaning of each cause and the accounting invariant.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -103,16 +104,142 @@ pub(crate) enum Cause {
     Truncated,
 }
 
-/// What a binary protocol tells the engine about its framing.
-pub(crate) trait Framing {
+mod sealed {
+    pub trait Sealed {}
+}
+
+/// What a binary packet protocol tells [`PacketScanner`] about its framing: header, length
+/// field, integrity check and how a checked frame reads. Implemented by
+/// [`Dxl2Framing`](crate::dynamixel2::Dxl2Framing) and
+/// [`Dxl1Framing`](crate::dynamixel1::Dxl1Framing); sealed.
+pub trait Framing: sealed::Sealed + 'static {
+    /// What the scanner yields: a checked packet, borrowed from the scanner's buffer.
+    type Packet<'a>;
     /// The fixed bytes every packet starts with.
     const HEADER: &'static [u8];
     /// How many leading bytes determine the total length (header, ID, length field).
     const FIELDS_LEN: usize;
+    /// The shortest packet the protocol has (wire bytes).
+    const MIN_PACKET: usize;
+    /// The longest packet the protocol can have (wire bytes).
+    const MAX_PACKET: usize;
     /// Total packet length from the first `FIELDS_LEN` bytes, or `None` if a field is invalid.
     fn total_len(fields: &[u8]) -> Option<usize>;
     /// Integrity check over a complete candidate.
     fn check(packet: &[u8]) -> bool;
+    /// Reads a frame whose header, length and integrity were checked (may rewrite it in
+    /// place, e.g. to remove byte stuffing).
+    fn decode(frame: &mut [u8]) -> Self::Packet<'_>;
+}
+
+impl sealed::Sealed for crate::dynamixel1::Dxl1Framing {}
+impl sealed::Sealed for crate::dynamixel2::Dxl2Framing {}
+
+/// Fixed-capacity stream scanner for a binary packet protocol `F`, with discard counters:
+/// bytes in any chunking → integrity-checked packets. `N` is the buffer capacity (at least 16);
+/// the largest packet it yields is `N - (header length - 1)` bytes or the smaller maximum given
+/// to [`with_max_packet`](Self::with_max_packet): a longer candidate counts as `oversize`. It
+/// yields status and instruction packets alike (a simulator scans instructions); ID and
+/// instruction filtering is the caller's business. See the [module docs](self) for the
+/// discard causes and the accounting invariant.
+pub struct PacketScanner<F, const N: usize> {
+    engine: Engine<N>,
+    framing: core::marker::PhantomData<F>,
+}
+
+impl<F: Framing, const N: usize> Default for PacketScanner<F, N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<F: Framing, const N: usize> PacketScanner<F, N> {
+    const MIN_CAPACITY: () = assert!(N >= 16, "scanner capacity must be at least 16 bytes");
+
+    /// A scanner accepting the longest packets the protocol and the buffer allow.
+    pub fn new() -> Self {
+        Self::with_max_packet(F::MAX_PACKET)
+    }
+
+    /// A scanner accepting packets up to `max_packet` wire bytes (clamped to what the
+    /// protocol and the buffer allow). A tight maximum (the longest reply the caller expects)
+    /// makes a corrupted length field cost less.
+    pub fn with_max_packet(max_packet: usize) -> Self {
+        #[allow(clippy::let_unit_value)]
+        let () = Self::MIN_CAPACITY;
+        Self {
+            engine: Engine::new(
+                max_packet.clamp(F::MIN_PACKET, F::MAX_PACKET),
+                F::HEADER.len(),
+            ),
+            framing: core::marker::PhantomData,
+        }
+    }
+
+    /// Largest packet (wire bytes) this scanner yields.
+    pub fn max_packet(&self) -> usize {
+        self.engine.max_packet()
+    }
+
+    /// Copies as many bytes as fit into the buffer; returns how many were taken. After
+    /// [`next_packet`](Self::next_packet) has returned `None` at least one byte always fits.
+    pub fn push(&mut self, bytes: &[u8]) -> usize {
+        self.engine.push(bytes)
+    }
+
+    /// The next complete packet whose integrity checked. It borrows the scanner's buffer and
+    /// is consumed by the next call.
+    pub fn next_packet(&mut self) -> Option<F::Packet<'_>> {
+        let range = self.engine.next_frame::<F>()?;
+        Some(F::decode(&mut self.engine.buf_mut()[range]))
+    }
+
+    /// Declares that no more bytes are coming for what is buffered (reply timeout): incomplete
+    /// candidates become `truncated` on the following [`next_packet`](Self::next_packet) calls,
+    /// and any complete packets behind them are still yielded. The next `push` ends this.
+    pub fn expire(&mut self) {
+        self.engine.expire();
+    }
+
+    /// Pushes all of `bytes`, calling `on_packet` for every packet completed.
+    pub fn feed(&mut self, bytes: &[u8], on_packet: impl FnMut(F::Packet<'_>)) {
+        feed(self, bytes, on_packet);
+    }
+
+    /// [`expire`](Self::expire), then drains: calls `on_packet` for packets still complete
+    /// behind truncated ones. The buffer is empty afterwards.
+    pub fn expire_with(&mut self, on_packet: impl FnMut(F::Packet<'_>)) {
+        expire_with(self, on_packet);
+    }
+
+    /// Discard counters since creation.
+    pub fn stats(&self) -> &ScanStats {
+        self.engine.stats()
+    }
+
+    /// Bytes accepted but not yet yielded or discarded.
+    pub fn buffered(&self) -> usize {
+        self.engine.buffered()
+    }
+}
+
+impl<F: Framing, const N: usize> Scan for PacketScanner<F, N> {
+    type Item<'a>
+        = F::Packet<'a>
+    where
+        Self: 'a;
+
+    fn push(&mut self, bytes: &[u8]) -> usize {
+        PacketScanner::push(self, bytes)
+    }
+
+    fn next_item(&mut self) -> Option<F::Packet<'_>> {
+        self.next_packet()
+    }
+
+    fn expire(&mut self) {
+        PacketScanner::expire(self);
+    }
 }
 
 /// Where a header could start.
@@ -143,15 +270,137 @@ fn find_header(data: &[u8], header: &[u8], from: usize, limit: usize, flush: boo
     HeaderAt::None
 }
 
-/// Fixed-capacity framing engine shared by the binary scanners.
-pub(crate) struct Engine<const N: usize> {
+/// The fixed-capacity byte window behind every scanner (binary and line): bytes are appended
+/// at the end and consumed from the start; the item last yielded stays in place until the next
+/// call (it is borrowed from here), and `expire` holds until the next `push`.
+pub(crate) struct Window<const N: usize> {
     buf: [u8; N],
     start: usize,
     end: usize,
-    /// Length of the packet last yielded; it stays in `buf` until the next call.
+    /// Length of the item last yielded.
     pending: usize,
-    max_packet: usize,
     flush: bool,
+}
+
+impl<const N: usize> Window<N> {
+    pub(crate) const fn new() -> Self {
+        Self {
+            buf: [0; N],
+            start: 0,
+            end: 0,
+            pending: 0,
+            flush: false,
+        }
+    }
+
+    /// Drops the item last yielded.
+    pub(crate) fn consume_pending(&mut self) {
+        let n = self.pending;
+        self.pending = 0;
+        self.drop_front(n);
+    }
+
+    /// Copies as many of `data` as fit (compacting first if needed); returns how many.
+    pub(crate) fn push(&mut self, data: &[u8]) -> usize {
+        self.consume_pending();
+        self.flush = false;
+        if self.start > 0 && self.end + data.len() > N {
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+        }
+        let n = data.len().min(N - self.end);
+        self.buf[self.end..self.end + n].copy_from_slice(&data[..n]);
+        self.end += n;
+        n
+    }
+
+    /// No more bytes are coming for what is buffered (until the next `push`).
+    pub(crate) fn expire(&mut self) {
+        self.flush = true;
+    }
+
+    pub(crate) fn flushing(&self) -> bool {
+        self.flush
+    }
+
+    /// The bytes not yet yielded or dropped.
+    pub(crate) fn data(&self) -> &[u8] {
+        &self.buf[self.start..self.end]
+    }
+
+    /// Drops the first `n` buffered bytes (discarded by the scanner).
+    pub(crate) fn drop_front(&mut self, n: usize) {
+        self.start += n;
+        if self.start == self.end {
+            self.start = 0;
+            self.end = 0;
+        }
+    }
+
+    /// Yields the first `n` buffered bytes: their range in the buffer, valid until the next
+    /// call.
+    pub(crate) fn yield_front(&mut self, n: usize) -> core::ops::Range<usize> {
+        self.pending = n;
+        self.start..self.start + n
+    }
+
+    pub(crate) fn buf(&self) -> &[u8; N] {
+        &self.buf
+    }
+
+    pub(crate) fn buf_mut(&mut self) -> &mut [u8; N] {
+        &mut self.buf
+    }
+
+    /// Bytes accepted but not yet yielded or dropped.
+    pub(crate) fn buffered(&self) -> usize {
+        self.end - self.start - self.pending
+    }
+}
+
+/// A scanner seen as a source of items (packets, lines, responses, commands): what the
+/// `feed` loop needs.
+pub(crate) trait Scan {
+    /// What the scanner yields, borrowed from its buffer.
+    type Item<'a>
+    where
+        Self: 'a;
+    /// Copies as many bytes as fit; returns how many were taken.
+    fn push(&mut self, bytes: &[u8]) -> usize;
+    /// The next item, if one is complete.
+    fn next_item(&mut self) -> Option<Self::Item<'_>>;
+    /// No more bytes are coming for what is buffered.
+    fn expire(&mut self);
+}
+
+/// Pushes all of `bytes` into `s`, handing every item completed to `on_item`; a full buffer
+/// is drained before more bytes go in.
+pub(crate) fn feed<S: Scan>(s: &mut S, mut bytes: &[u8], mut on_item: impl FnMut(S::Item<'_>)) {
+    loop {
+        let n = s.push(bytes);
+        bytes = &bytes[n..];
+        while let Some(item) = s.next_item() {
+            on_item(item);
+        }
+        if bytes.is_empty() {
+            return;
+        }
+    }
+}
+
+/// Expires `s`, then hands every item still complete behind what is truncated to `on_item`.
+pub(crate) fn expire_with<S: Scan>(s: &mut S, mut on_item: impl FnMut(S::Item<'_>)) {
+    s.expire();
+    while let Some(item) = s.next_item() {
+        on_item(item);
+    }
+}
+
+/// Fixed-capacity framing engine shared by the binary scanners.
+pub(crate) struct Engine<const N: usize> {
+    win: Window<N>,
+    max_packet: usize,
     garbage_run: bool,
     stats: ScanStats,
 }
@@ -162,12 +411,8 @@ impl<const N: usize> Engine<N> {
     pub(crate) fn new(max_packet: usize, header_len: usize) -> Self {
         let cap = N.saturating_sub(header_len.saturating_sub(1));
         Self {
-            buf: [0; N],
-            start: 0,
-            end: 0,
-            pending: 0,
+            win: Window::new(),
             max_packet: max_packet.min(cap),
-            flush: false,
             garbage_run: false,
             stats: ScanStats::default(),
         }
@@ -182,39 +427,21 @@ impl<const N: usize> Engine<N> {
     }
 
     pub(crate) fn buffered(&self) -> usize {
-        self.end - self.start - self.pending
-    }
-
-    fn consume_pending(&mut self) {
-        self.start += self.pending;
-        self.pending = 0;
-        if self.start == self.end {
-            self.start = 0;
-            self.end = 0;
-        }
+        self.win.buffered()
     }
 
     pub(crate) fn push(&mut self, data: &[u8]) -> usize {
-        self.consume_pending();
-        self.flush = false;
-        if self.start > 0 && self.end + data.len() > N {
-            self.buf.copy_within(self.start..self.end, 0);
-            self.end -= self.start;
-            self.start = 0;
-        }
-        let n = data.len().min(N - self.end);
-        self.buf[self.end..self.end + n].copy_from_slice(&data[..n]);
-        self.end += n;
+        let n = self.win.push(data);
         self.stats.bytes_in += n as u64;
         n
     }
 
     pub(crate) fn expire(&mut self) {
-        self.flush = true;
+        self.win.expire();
     }
 
     pub(crate) fn buf_mut(&mut self) -> &mut [u8; N] {
-        &mut self.buf
+        self.win.buf_mut()
     }
 
     fn discard(&mut self, n: usize, cause: Cause) {
@@ -228,14 +455,14 @@ impl<const N: usize> Engine<N> {
             Cause::Truncated => s.truncated.add(n, true),
         }
         self.garbage_run = cause == Cause::Garbage;
-        self.start += n;
+        self.win.drop_front(n);
     }
 
     /// Rejects the candidate at the head: discards its first `limit` bytes, or fewer if a
     /// complete header starts inside them. Returns false if that cannot be decided yet.
     fn reject<F: Framing>(&mut self, cause: Cause, limit: usize) -> bool {
-        let data = &self.buf[self.start..self.end];
-        let cut = match find_header(data, F::HEADER, 1, limit, self.flush) {
+        let data = self.win.data();
+        let cut = match find_header(data, F::HEADER, 1, limit, self.win.flushing()) {
             HeaderAt::Full(k) => k,
             HeaderAt::Partial(_) => return false,
             HeaderAt::None => limit.min(data.len()),
@@ -246,16 +473,15 @@ impl<const N: usize> Engine<N> {
 
     /// Scans for the next complete, checked packet and returns its range in the buffer.
     pub(crate) fn next_frame<F: Framing>(&mut self) -> Option<core::ops::Range<usize>> {
-        self.consume_pending();
+        self.win.consume_pending();
         loop {
-            let avail = self.end - self.start;
+            let data = self.win.data();
+            let avail = data.len();
             if avail == 0 {
-                self.start = 0;
-                self.end = 0;
                 return None;
             }
-            let data = &self.buf[self.start..self.end];
-            match find_header(data, F::HEADER, 0, avail, self.flush) {
+            let flush = self.win.flushing();
+            match find_header(data, F::HEADER, 0, avail, flush) {
                 HeaderAt::Full(0) | HeaderAt::Partial(0) => {}
                 HeaderAt::Full(i) | HeaderAt::Partial(i) => {
                     self.discard(i, Cause::Garbage);
@@ -267,7 +493,7 @@ impl<const N: usize> Engine<N> {
                 }
             }
             if avail < F::FIELDS_LEN {
-                if self.flush {
+                if flush {
                     self.discard(avail, Cause::Truncated);
                     continue;
                 }
@@ -289,7 +515,7 @@ impl<const N: usize> Engine<N> {
                 Some(t) => t,
             };
             if avail < total {
-                if self.flush {
+                if flush {
                     // Resolved with flush semantics, so this always discards.
                     self.reject::<F>(Cause::Truncated, avail);
                     continue;
@@ -305,8 +531,7 @@ impl<const N: usize> Engine<N> {
             self.stats.packets += 1;
             self.stats.packet_bytes += total as u64;
             self.garbage_run = false;
-            self.pending = total;
-            return Some(self.start..self.start + total);
+            return Some(self.win.yield_front(total));
         }
     }
 }

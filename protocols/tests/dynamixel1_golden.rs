@@ -145,3 +145,50 @@ fn leading_ff_run_is_counted_as_bad_header() {
     assert_eq!(s.stats().bad_header.bytes, 2);
     assert_eq!(s.stats().bad_header.events, 2);
 }
+
+#[test]
+fn encoder_rejects_bad_requests() {
+    let mut b = [0u8; 64];
+    // 1.0 device IDs run to 0xFD; 0xFE is broadcast, 0xFF is never an ID.
+    // Checksum: !(0xFD + 0x02 + 0x01) = !0x00 (low byte) = 0xFF.
+    assert_eq!(enc(|b| ping(b, 0xFD)), hex("FF FF FD 02 01 FF"));
+    assert_eq!(ping(&mut b, 0xFF), Err(EncodeError::InvalidId(0xFF)));
+    assert_eq!(
+        read(&mut b, BROADCAST_ID, 36, 2),
+        Err(EncodeError::InvalidId(0xFE))
+    );
+    let goal = [0u8, 2];
+    assert_eq!(
+        sync_write(
+            &mut b,
+            30,
+            2,
+            [(1, &goal[..]), (2, &goal[..]), (1, &goal[..])]
+        ),
+        Err(EncodeError::DuplicateId(1))
+    );
+    assert_eq!(
+        sync_write(&mut b, 30, 2, [(BROADCAST_ID, &goal[..])]),
+        Err(EncodeError::InvalidId(0xFE))
+    );
+    assert_eq!(
+        sync_write(&mut b, 30, 2, [(1, &goal[..1])]),
+        Err(EncodeError::DataLength {
+            expected: 2,
+            got: 1
+        })
+    );
+    assert_eq!(
+        sync_write(&mut b, 30, 2, core::iter::empty()),
+        Err(EncodeError::NoEntries)
+    );
+    assert_eq!(bulk_read(&mut b, []), Err(EncodeError::NoEntries));
+    // LEN is one byte: at most 253 parameter bytes after the instruction.
+    let mut out = [0u8; 300];
+    assert_eq!(write(&mut out, 1, 0, &[0u8; 251]).map(|n| n > 0), Ok(true));
+    assert_eq!(
+        write(&mut out, 1, 0, &[0u8; 253]),
+        Err(EncodeError::TooLong)
+    );
+    assert_eq!(ping(&mut b[..5], 1), Err(EncodeError::BufferTooSmall));
+}

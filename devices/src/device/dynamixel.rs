@@ -3,10 +3,9 @@
 
 use std::f64::consts::PI;
 
-use super::register::{Encoding, RegChannel, RegDevice};
-use crate::message::{Credential, Reply, Request, Update};
-use crate::queue::Bounded;
-use crate::stage::{Channel, Device, SafeAction, TickCtx};
+use super::register::{ControlTable, Encoding, RegChannel, RegDevice};
+use crate::message::Credential;
+use crate::stage::SafeAction;
 
 /// X-series control table addresses (XM430, protocols.md §1.9).
 pub mod x_table {
@@ -90,193 +89,80 @@ fn goal_range(mode: u8) -> (i64, i64) {
     }
 }
 
-/// A Dynamixel X-series servo (XM430/XM540/XH430 control table) on Protocol 2.0.
-#[derive(Debug)]
-pub struct DynamixelX {
-    dev: RegDevice,
+/// The X-series control table (XM430/XM540/XH430) on Protocol 2.0, with the servo's
+/// configuration. Its Operating Mode decides the Goal Position range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct XSeries {
     cfg: DxlXConfig,
 }
 
-impl DynamixelX {
-    /// The servo with ID `cred.id`.
-    pub fn new(cred: Credential, cfg: DxlXConfig) -> Self {
+impl ControlTable for XSeries {
+    const SAFE_ACTION: SafeAction = SafeAction::Hold;
+    const HOLD: Option<usize> = Some(x_channel::POSITION);
+    const TORQUE_OFF: Option<(u16, u8, i64)> = Some((x_table::TORQUE_ENABLE, 1, 0));
+
+    fn channels(&self) -> Vec<RegChannel> {
         use x_table::*;
+        use Encoding::{Signed, Unsigned};
+        let cfg = self.cfg;
         let pos_max = (cfg.max_position_rev * 4096.0) as i64;
         let goal = goal_range(cfg.operating_mode);
-        let table = vec![
-            RegChannel {
-                name: "position",
-                units: "rad",
-                read: Some(PRESENT_POSITION),
-                write: Some(GOAL_POSITION),
-                len: 4,
-                encoding: Encoding::Signed,
-                scale: PULSE_RAD,
-                offset: cfg.zero,
-                read_range: (-pos_max, pos_max),
-                write_range: goal,
-            },
-            RegChannel {
-                name: "velocity",
-                units: "rad/s",
-                read: Some(PRESENT_VELOCITY),
-                write: Some(GOAL_VELOCITY),
-                len: 4,
-                encoding: Encoding::Signed,
-                scale: VEL_UNIT,
-                offset: 0,
-                read_range: (-1023, 1023),
-                write_range: (-1023, 1023),
-            },
-            RegChannel {
-                name: "current",
-                units: "A",
-                read: Some(PRESENT_CURRENT),
-                write: Some(GOAL_CURRENT),
-                len: 2,
-                encoding: Encoding::Signed,
-                scale: cfg.current_unit_ma * 1e-3,
-                offset: 0,
-                read_range: (-cfg.max_current_raw, cfg.max_current_raw),
-                write_range: (-cfg.max_current_raw, cfg.max_current_raw),
-            },
-            RegChannel {
-                name: "goal_position",
-                units: "rad",
-                read: Some(GOAL_POSITION),
-                write: Some(GOAL_POSITION),
-                len: 4,
-                encoding: Encoding::Signed,
-                scale: PULSE_RAD,
-                offset: cfg.zero,
-                read_range: (-1_048_575, 1_048_575),
-                write_range: goal,
-            },
-            RegChannel {
-                name: "torque_enable",
-                units: "",
-                read: Some(TORQUE_ENABLE),
-                write: Some(TORQUE_ENABLE),
-                len: 1,
-                encoding: Encoding::Unsigned,
-                scale: 1.0,
-                offset: 0,
-                read_range: (0, 1),
-                write_range: (0, 1),
-            },
-            RegChannel {
-                name: "operating_mode",
-                units: "",
-                read: Some(OPERATING_MODE),
-                write: Some(OPERATING_MODE),
-                len: 1,
-                encoding: Encoding::Unsigned,
-                scale: 1.0,
-                offset: 0,
-                read_range: (0, 16),
-                write_range: (0, 16),
-            },
-            RegChannel {
-                name: "temperature",
-                units: "degC",
-                read: Some(PRESENT_TEMPERATURE),
-                write: None,
-                len: 1,
-                encoding: Encoding::Unsigned,
-                scale: 1.0,
-                offset: 0,
-                read_range: (0, 150),
-                write_range: (0, 0),
-            },
-            RegChannel {
-                name: "voltage",
-                units: "V",
-                read: Some(PRESENT_INPUT_VOLTAGE),
-                write: None,
-                len: 2,
-                encoding: Encoding::Unsigned,
-                scale: 0.1,
-                offset: 0,
-                read_range: (0, 400),
-                write_range: (0, 0),
-            },
-        ];
-        Self {
-            dev: RegDevice::new(
-                cred,
-                table,
-                Some(x_channel::POSITION),
-                Some((TORQUE_ENABLE, 1, 0)),
-            ),
-            cfg,
+        let current = (-cfg.max_current_raw, cfg.max_current_raw);
+        vec![
+            RegChannel::new("position", "rad", 4, Signed)
+                .reads(PRESENT_POSITION, (-pos_max, pos_max))
+                .writes(GOAL_POSITION, goal)
+                .scaled(PULSE_RAD, cfg.zero),
+            RegChannel::new("velocity", "rad/s", 4, Signed)
+                .reads(PRESENT_VELOCITY, (-1023, 1023))
+                .writes(GOAL_VELOCITY, (-1023, 1023))
+                .scaled(VEL_UNIT, 0),
+            RegChannel::new("current", "A", 2, Signed)
+                .reads(PRESENT_CURRENT, current)
+                .writes(GOAL_CURRENT, current)
+                .scaled(cfg.current_unit_ma * 1e-3, 0),
+            RegChannel::new("goal_position", "rad", 4, Signed)
+                .reads(GOAL_POSITION, (-1_048_575, 1_048_575))
+                .writes(GOAL_POSITION, goal)
+                .scaled(PULSE_RAD, cfg.zero),
+            RegChannel::new("torque_enable", "", 1, Unsigned)
+                .reads(TORQUE_ENABLE, (0, 1))
+                .writes(TORQUE_ENABLE, (0, 1)),
+            RegChannel::new("operating_mode", "", 1, Unsigned)
+                .reads(OPERATING_MODE, (0, 16))
+                .writes(OPERATING_MODE, (0, 16)),
+            RegChannel::new("temperature", "degC", 1, Unsigned)
+                .reads(PRESENT_TEMPERATURE, (0, 150)),
+            RegChannel::new("voltage", "V", 2, Unsigned)
+                .reads(PRESENT_INPUT_VOLTAGE, (0, 400))
+                .scaled(0.1, 0),
+        ]
+    }
+
+    fn on_raw(&mut self, table: &mut [RegChannel], i: usize, raw: i64) {
+        if i != x_channel::OPERATING_MODE {
+            return;
+        }
+        let mode = raw as u8;
+        self.cfg.operating_mode = mode;
+        for c in [x_channel::POSITION, x_channel::GOAL_POSITION] {
+            table[c].write_range = goal_range(mode);
         }
     }
+}
 
-    /// The safe action this kind declares: hold the present position.
-    pub const SAFE_ACTION: SafeAction = SafeAction::Hold;
+/// A Dynamixel X-series servo (XM430/XM540/XH430 control table) on Protocol 2.0.
+pub type DynamixelX = RegDevice<XSeries>;
 
-    /// Values rejected by the range check (damaged packets that passed the CRC).
-    pub fn range_rejects(&self) -> u64 {
-        self.dev.range_rejects()
-    }
-
-    /// Last good value of a channel.
-    pub fn last(&self, channel: usize) -> Option<f64> {
-        self.dev.last(channel)
+impl RegDevice<XSeries> {
+    /// The servo with ID `cred.id`.
+    pub fn new(cred: Credential, cfg: DxlXConfig) -> Self {
+        Self::with_table(cred, XSeries { cfg })
     }
 
     /// Raw position for `rad` (what the servo is sent).
     pub fn position_raw(&self, rad: f64) -> i64 {
-        self.dev.table()[x_channel::POSITION].to_raw(rad)
-    }
-
-    fn set_mode(&mut self, mode: u8) {
-        self.cfg.operating_mode = mode;
-        let r = goal_range(mode);
-        self.dev.set_write_range(x_channel::POSITION, r);
-        self.dev.set_write_range(x_channel::GOAL_POSITION, r);
-    }
-}
-
-impl Device for DynamixelX {
-    fn credential(&self) -> Credential {
-        self.dev.credential()
-    }
-
-    fn channels(&self) -> &[Channel] {
-        self.dev.channels()
-    }
-
-    fn sample(&mut self, channel: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.dev.sample(channel, ctx, out);
-    }
-
-    fn write(&mut self, channel: usize, value: f64, _ctx: TickCtx) {
-        if let Some(raw) = self.dev.write(channel, value) {
-            if channel == x_channel::OPERATING_MODE {
-                self.set_mode(raw as u8);
-            }
-        }
-    }
-
-    fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.dev.flush(ctx, out);
-    }
-
-    fn reply(&mut self, reply: &Reply, out: &mut Bounded<Update>) {
-        let mut mode = None;
-        self.dev.reply(reply, out, |i, raw| {
-            if i == x_channel::OPERATING_MODE {
-                mode = Some(raw as u8);
-            }
-        });
-        if let Some(m) = mode {
-            self.set_mode(m);
-        }
-    }
-
-    fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.dev.safe(action, ctx, out);
+        self.table()[x_channel::POSITION].to_raw(rad)
     }
 }
 
@@ -306,148 +192,56 @@ pub mod dxl1_channel {
     pub const VOLTAGE: usize = 5;
 }
 
-/// A Dynamixel AX/MX servo on Protocol 1.0.
-#[derive(Debug)]
-pub struct Dynamixel1 {
-    dev: RegDevice,
+/// The AX/MX control table on Protocol 1.0: model and the raw position meaning 0 rad.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Dxl1Series {
+    model: Dxl1Model,
+    zero: i64,
 }
 
-impl Dynamixel1 {
-    /// The servo with ID `cred.id`; `zero` is the raw position meaning 0 rad (512 for AX, 2048
-    /// for MX).
-    pub fn new(cred: Credential, model: Dxl1Model, zero: i64) -> Self {
-        let (steps, span_rad, rpm) = match model {
+impl ControlTable for Dxl1Series {
+    const SAFE_ACTION: SafeAction = SafeAction::Hold;
+    const HOLD: Option<usize> = Some(dxl1_channel::POSITION);
+    const TORQUE_OFF: Option<(u16, u8, i64)> = Some((24, 1, 0));
+
+    fn channels(&self) -> Vec<RegChannel> {
+        use Encoding::{SignMagnitude10, Unsigned};
+        let (steps, span_rad, rpm) = match self.model {
             Dxl1Model::Ax => (1024i64, 300f64.to_radians(), 0.111),
             Dxl1Model::Mx => (4096, 2.0 * PI, 0.114),
         };
         let speed = rpm * 2.0 * PI / 60.0;
-        let reg = |name, units, read, write, len, encoding, scale, offset, rr, wr| RegChannel {
-            name,
-            units,
-            read,
-            write,
-            len,
-            encoding,
-            scale,
-            offset,
-            read_range: rr,
-            write_range: wr,
-        };
-        let table = vec![
-            reg(
-                "position",
-                "rad",
-                Some(36),
-                Some(30),
-                2,
-                Encoding::Unsigned,
-                span_rad / steps as f64,
-                zero,
-                (0, steps - 1),
-                (0, steps - 1),
-            ),
+        vec![
+            RegChannel::new("position", "rad", 2, Unsigned)
+                .reads(36, (0, steps - 1))
+                .writes(30, (0, steps - 1))
+                .scaled(span_rad / steps as f64, self.zero),
             // Moving Speed 0 means "as fast as possible": the smallest magnitude written is 1.
-            reg(
-                "velocity",
-                "rad/s",
-                Some(38),
-                Some(32),
-                2,
-                Encoding::SignMagnitude10,
-                speed,
-                0,
-                (-1023, 1023),
-                (1, 1023),
-            ),
-            reg(
-                "load",
-                "",
-                Some(40),
-                None,
-                2,
-                Encoding::SignMagnitude10,
-                1.0 / 1023.0,
-                0,
-                (-1023, 1023),
-                (0, 0),
-            ),
-            reg(
-                "torque_enable",
-                "",
-                Some(24),
-                Some(24),
-                1,
-                Encoding::Unsigned,
-                1.0,
-                0,
-                (0, 1),
-                (0, 1),
-            ),
-            reg(
-                "temperature",
-                "degC",
-                Some(43),
-                None,
-                1,
-                Encoding::Unsigned,
-                1.0,
-                0,
-                (0, 150),
-                (0, 0),
-            ),
-            reg(
-                "voltage",
-                "V",
-                Some(42),
-                None,
-                1,
-                Encoding::Unsigned,
-                0.1,
-                0,
-                (0, 250),
-                (0, 0),
-            ),
-        ];
-        Self {
-            dev: RegDevice::new(cred, table, Some(dxl1_channel::POSITION), Some((24, 1, 0))),
-        }
-    }
-
-    /// The safe action this kind declares: hold the present position.
-    pub const SAFE_ACTION: SafeAction = SafeAction::Hold;
-
-    /// Values rejected by the range check.
-    pub fn range_rejects(&self) -> u64 {
-        self.dev.range_rejects()
+            RegChannel::new("velocity", "rad/s", 2, SignMagnitude10)
+                .reads(38, (-1023, 1023))
+                .writes(32, (1, 1023))
+                .scaled(speed, 0),
+            RegChannel::new("load", "", 2, SignMagnitude10)
+                .reads(40, (-1023, 1023))
+                .scaled(1.0 / 1023.0, 0),
+            RegChannel::new("torque_enable", "", 1, Unsigned)
+                .reads(24, (0, 1))
+                .writes(24, (0, 1)),
+            RegChannel::new("temperature", "degC", 1, Unsigned).reads(43, (0, 150)),
+            RegChannel::new("voltage", "V", 1, Unsigned)
+                .reads(42, (0, 250))
+                .scaled(0.1, 0),
+        ]
     }
 }
 
-impl Device for Dynamixel1 {
-    fn credential(&self) -> Credential {
-        self.dev.credential()
-    }
+/// A Dynamixel AX/MX servo on Protocol 1.0.
+pub type Dynamixel1 = RegDevice<Dxl1Series>;
 
-    fn channels(&self) -> &[Channel] {
-        self.dev.channels()
-    }
-
-    fn sample(&mut self, channel: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.dev.sample(channel, ctx, out);
-    }
-
-    fn write(&mut self, channel: usize, value: f64, _ctx: TickCtx) {
-        self.dev.write(channel, value);
-    }
-
-    fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.dev.flush(ctx, out);
-    }
-
-    fn reply(&mut self, reply: &Reply, out: &mut Bounded<Update>) {
-        self.dev.reply(reply, out, |_, _| {});
-    }
-
-    fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.dev.safe(action, ctx, out);
+impl RegDevice<Dxl1Series> {
+    /// The servo with ID `cred.id`; `zero` is the raw position meaning 0 rad (512 for AX, 2048
+    /// for MX).
+    pub fn new(cred: Credential, model: Dxl1Model, zero: i64) -> Self {
+        Self::with_table(cred, Dxl1Series { model, zero })
     }
 }

@@ -28,42 +28,12 @@ pub mod mit_channel {
 }
 
 const CHANNELS: [Channel; 6] = [
-    Channel {
-        name: "position",
-        units: "rad",
-        readable: true,
-        writable: true,
-    },
-    Channel {
-        name: "velocity",
-        units: "rad/s",
-        readable: true,
-        writable: true,
-    },
-    Channel {
-        name: "torque",
-        units: "N.m",
-        readable: true,
-        writable: true,
-    },
-    Channel {
-        name: "kp",
-        units: "N.m/rad",
-        readable: false,
-        writable: true,
-    },
-    Channel {
-        name: "kd",
-        units: "N.m.s/rad",
-        readable: false,
-        writable: true,
-    },
-    Channel {
-        name: "enable",
-        units: "",
-        readable: false,
-        writable: true,
-    },
+    Channel::read_write("position", "rad"),
+    Channel::read_write("velocity", "rad/s"),
+    Channel::read_write("torque", "N.m"),
+    Channel::write_only("kp", "N.m/rad"),
+    Channel::write_only("kd", "N.m.s/rad"),
+    Channel::write_only("enable", ""),
 ];
 
 /// Command targets.
@@ -126,12 +96,7 @@ impl MitMotor {
     }
 
     fn push(&self, op: Op, ctx: TickCtx, out: &mut Bounded<Request>) {
-        let _ = out.push(Request {
-            cred: self.cred,
-            op,
-            tick: ctx.tick,
-            t_request_ns: ctx.now_ns,
-        });
+        let _ = out.push(Request::new(self.cred, op, ctx));
     }
 
     fn command(&self) -> Op {
@@ -237,13 +202,7 @@ impl Device for MitMotor {
             if self.sampled & (1 << ch) == 0 {
                 continue;
             }
-            let _ = out.push(Update {
-                channel: ch,
-                value: vals.map(|v| v[ch]),
-                fault,
-                tick: reply.tick,
-                t_sample_ns: reply.t_sample_ns,
-            });
+            let _ = out.push(Update::from_reply(reply, ch, vals.map(|v| v[ch]), fault));
         }
     }
 

@@ -16,8 +16,9 @@ mod odrive;
 mod register;
 
 pub use dynamixel::{
-    dxl1_channel, x_channel, x_table, Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX,
+    dxl1_channel, x_channel, x_table, Dxl1Model, Dxl1Series, DxlXConfig, Dynamixel1, DynamixelX,
+    XSeries,
 };
 pub use mit::{mit_channel, MitMotor};
 pub use odrive::{odrive_channel, OdriveAxis, OdriveMode};
-pub use register::{Encoding, RegChannel, RegDevice};
+pub use register::{ControlTable, Encoding, RegChannel, RegDevice};

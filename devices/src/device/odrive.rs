@@ -36,54 +36,14 @@ pub mod odrive_channel {
 }
 
 const CHANNELS: [Channel; 8] = [
-    Channel {
-        name: "position",
-        units: "rad",
-        readable: true,
-        writable: true,
-    },
-    Channel {
-        name: "velocity",
-        units: "rad/s",
-        readable: true,
-        writable: true,
-    },
-    Channel {
-        name: "torque",
-        units: "N.m",
-        readable: true,
-        writable: true,
-    },
-    Channel {
-        name: "current",
-        units: "A",
-        readable: true,
-        writable: false,
-    },
-    Channel {
-        name: "state",
-        units: "",
-        readable: true,
-        writable: true,
-    },
-    Channel {
-        name: "error",
-        units: "",
-        readable: true,
-        writable: false,
-    },
-    Channel {
-        name: "bus_voltage",
-        units: "V",
-        readable: true,
-        writable: false,
-    },
-    Channel {
-        name: "temperature",
-        units: "degC",
-        readable: true,
-        writable: false,
-    },
+    Channel::read_write("position", "rad"),
+    Channel::read_write("velocity", "rad/s"),
+    Channel::read_write("torque", "N.m"),
+    Channel::read_only("current", "A"),
+    Channel::read_write("state", ""),
+    Channel::read_only("error", ""),
+    Channel::read_only("bus_voltage", "V"),
+    Channel::read_only("temperature", "degC"),
 ];
 
 /// Which input the axis's controller takes.
@@ -154,12 +114,7 @@ impl OdriveAxis {
     pub const SAFE_ACTION: SafeAction = SafeAction::TorqueOff;
 
     fn push(&self, msg: Message, ctx: TickCtx, out: &mut Bounded<Request>) {
-        let _ = out.push(Request {
-            cred: self.cred,
-            op: Op::Odrive(msg),
-            tick: ctx.tick,
-            t_request_ns: ctx.now_ns,
-        });
+        let _ = out.push(Request::new(self.cred, Op::Odrive(msg), ctx));
     }
 
     fn setpoint(&self) -> Message {
@@ -188,13 +143,7 @@ impl OdriveAxis {
         r: &Reply,
         out: &mut Bounded<Update>,
     ) {
-        let _ = out.push(Update {
-            channel: ch,
-            value,
-            fault,
-            tick: r.tick,
-            t_sample_ns: r.t_sample_ns,
-        });
+        let _ = out.push(Update::from_reply(r, ch, value, fault));
     }
 }
 

@@ -1,6 +1,7 @@
-//! Register-mapped devices (Dynamixel 2.0 and 1.0): a table of channels, each a control-table
-//! register (or a read/write register pair) with its size, signedness, scale, offset and the
-//! range of raw values a healthy servo can report.
+//! Register-mapped devices (Dynamixel 2.0 and 1.0): one generic device, [`RegDevice`], over a
+//! family's [`ControlTable`]: a table of channels, each a control-table register (or a
+//! read/write register pair) with its size, signedness, scale, offset and the range of raw
+//! values a healthy servo can report.
 //!
 //! Range checks matter: a CRC-16 lets about one damaged packet in 65 536 through, a 1.0
 //! checksum one in 256. A value outside its register's physical range is therefore treated as
@@ -8,7 +9,7 @@
 
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
-use crate::stage::{Channel, SafeAction, TickCtx};
+use crate::stage::{Channel, Device, SafeAction, TickCtx};
 
 /// How raw register values are encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -47,6 +48,45 @@ pub struct RegChannel {
 }
 
 impl RegChannel {
+    /// A channel of `len`-byte registers with `encoding`, 1 unit per raw step from raw 0; add its
+    /// registers with [`reads`](Self::reads) and [`writes`](Self::writes) and its scale with
+    /// [`scaled`](Self::scaled).
+    pub const fn new(name: &'static str, units: &'static str, len: u8, encoding: Encoding) -> Self {
+        Self {
+            name,
+            units,
+            read: None,
+            write: None,
+            len,
+            encoding,
+            scale: 1.0,
+            offset: 0,
+            read_range: (0, 0),
+            write_range: (0, 0),
+        }
+    }
+
+    /// Sampled from register `addr`, whose healthy raw values are `range`.
+    pub const fn reads(mut self, addr: u16, range: (i64, i64)) -> Self {
+        self.read = Some(addr);
+        self.read_range = range;
+        self
+    }
+
+    /// Written to register `addr`, setpoints clamped to the raw `range`.
+    pub const fn writes(mut self, addr: u16, range: (i64, i64)) -> Self {
+        self.write = Some(addr);
+        self.write_range = range;
+        self
+    }
+
+    /// `scale` units per raw step, raw `offset` meaning 0 units.
+    pub const fn scaled(mut self, scale: f64, offset: i64) -> Self {
+        self.scale = scale;
+        self.offset = offset;
+        self
+    }
+
     /// The manifest-facing description.
     pub fn channel(&self) -> Channel {
         Channel {
@@ -99,10 +139,32 @@ impl RegChannel {
     }
 }
 
-/// The generic register device: sampling, buffered writes, reply interpretation, range
-/// checks and safe actions over a channel table.
+/// What sets one family of register-mapped servos apart (its control table); the
+/// [`RegDevice`] it parameterises does the rest.
+pub trait ControlTable: std::fmt::Debug {
+    /// The safe action devices of this family declare.
+    const SAFE_ACTION: SafeAction;
+    /// The channel whose last value [`SafeAction::Hold`] writes back to its write register
+    /// (the present position, written as the goal).
+    const HOLD: Option<usize>;
+    /// The register write `(addr, len, value)` that switches torque off.
+    const TORQUE_OFF: Option<(u16, u8, i64)>;
+
+    /// The channels, in channel-index order.
+    fn channels(&self) -> Vec<RegChannel>;
+
+    /// Channel `i` has just taken raw value `raw` (a setpoint written, or a good value read):
+    /// a family whose registers depend on each other re-ranges `table` here.
+    fn on_raw(&mut self, table: &mut [RegChannel], i: usize, raw: i64) {
+        let _ = (table, i, raw);
+    }
+}
+
+/// A register-mapped device: sampling, buffered writes, reply interpretation, range checks
+/// and safe actions over the channel table of its family `T`.
 #[derive(Debug)]
-pub struct RegDevice {
+pub struct RegDevice<T: ControlTable> {
+    family: T,
     cred: Credential,
     table: Vec<RegChannel>,
     channels: Vec<Channel>,
@@ -115,23 +177,19 @@ pub struct RegDevice {
     device_errors: u64,
     /// Channel index of the present position (for Hold) and the goal-position register.
     hold: Option<(usize, u16)>,
-    /// Register and value that switch torque off.
-    torque_off: Option<(u16, u8, i64)>,
 }
 
-impl RegDevice {
-    /// A device at `cred` with channel `table`; `hold` names the present-position channel
-    /// whose last value is written back as the goal for [`SafeAction::Hold`], `torque_off` the
-    /// register write that disables torque.
-    pub fn new(
-        cred: Credential,
-        table: Vec<RegChannel>,
-        hold: Option<usize>,
-        torque_off: Option<(u16, u8, i64)>,
-    ) -> Self {
+impl<T: ControlTable> RegDevice<T> {
+    /// The safe action this kind declares.
+    pub const SAFE_ACTION: SafeAction = T::SAFE_ACTION;
+
+    /// A device of `family` at `cred`.
+    pub fn with_table(cred: Credential, family: T) -> Self {
+        let table = family.channels();
         let n = table.len();
-        let hold = hold.and_then(|i| Some((i, table.get(i)?.write?)));
+        let hold = T::HOLD.and_then(|i| Some((i, table.get(i)?.write?)));
         Self {
+            family,
             cred,
             channels: table.iter().map(RegChannel::channel).collect(),
             table,
@@ -141,18 +199,12 @@ impl RegDevice {
             range_rejects: 0,
             device_errors: 0,
             hold,
-            torque_off,
         }
     }
 
-    /// The device's address.
-    pub fn credential(&self) -> Credential {
-        self.cred
-    }
-
-    /// The channel descriptions.
-    pub fn channels(&self) -> &[Channel] {
-        &self.channels
+    /// The family's control table and state.
+    pub fn family(&self) -> &T {
+        &self.family
     }
 
     /// The channel table.
@@ -160,14 +212,8 @@ impl RegDevice {
         &self.table
     }
 
-    /// Replaces channel `i`'s write range (e.g. after an operating-mode change).
-    pub fn set_write_range(&mut self, i: usize, range: (i64, i64)) {
-        if let Some(c) = self.table.get_mut(i) {
-            c.write_range = range;
-        }
-    }
-
-    /// Values rejected by the range check since start.
+    /// Values rejected by the range check since start (damaged packets that passed the
+    /// CRC/checksum).
     pub fn range_rejects(&self) -> u64 {
         self.range_rejects
     }
@@ -183,59 +229,49 @@ impl RegDevice {
         Some(self.table[i].to_units(raw))
     }
 
-    /// Queues the read of channel `i`.
-    pub fn sample(&mut self, i: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
-        let Some(c) = self.table.get(i) else { return };
-        let Some(addr) = c.read else { return };
-        let _ = out.push(Request {
-            cred: self.cred,
-            op: Op::Read { addr, len: c.len },
-            tick: ctx.tick,
-            t_request_ns: ctx.now_ns,
-        });
+    fn push_write(&self, addr: u16, len: u8, value: i64, ctx: TickCtx, out: &mut Bounded<Request>) {
+        let op = Op::Write { addr, len, value };
+        let _ = out.push(Request::new(self.cred, op, ctx));
+    }
+}
+
+impl<T: ControlTable> Device for RegDevice<T> {
+    fn credential(&self) -> Credential {
+        self.cred
     }
 
-    /// Records a setpoint (units) for channel `i`; returns the raw value stored.
-    pub fn write(&mut self, i: usize, value: f64) -> Option<i64> {
-        let c = self.table.get(i)?;
-        c.write?;
-        if !value.is_finite() {
-            return None;
+    fn channels(&self) -> &[Channel] {
+        &self.channels
+    }
+
+    fn sample(&mut self, i: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
+        let Some(c) = self.table.get(i) else { return };
+        let Some(addr) = c.read else { return };
+        let _ = out.push(Request::new(self.cred, Op::Read { addr, len: c.len }, ctx));
+    }
+
+    fn write(&mut self, i: usize, value: f64, _ctx: TickCtx) {
+        let Some(c) = self.table.get(i) else { return };
+        if c.write.is_none() || !value.is_finite() {
+            return;
         }
         let raw = c.to_raw(value);
         self.pending[i] = Some(raw);
-        Some(raw)
+        self.family.on_raw(&mut self.table, i, raw);
     }
 
-    /// Emits the buffered writes.
-    pub fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
+    fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
         for i in 0..self.table.len() {
             let Some(raw) = self.pending[i].take() else {
                 continue;
             };
             let c = self.table[i];
             let Some(addr) = c.write else { continue };
-            let _ = out.push(Request {
-                cred: self.cred,
-                op: Op::Write {
-                    addr,
-                    len: c.len,
-                    value: c.encode_raw(raw),
-                },
-                tick: ctx.tick,
-                t_request_ns: ctx.now_ns,
-            });
+            self.push_write(addr, c.len, c.encode_raw(raw), ctx, out);
         }
     }
 
-    /// Interprets a reply: returns, per updated channel, its raw value (for device-specific
-    /// bookkeeping such as the operating mode).
-    pub fn reply(
-        &mut self,
-        reply: &Reply,
-        out: &mut Bounded<Update>,
-        mut seen: impl FnMut(usize, i64),
-    ) {
+    fn reply(&mut self, reply: &Reply, out: &mut Bounded<Update>) {
         let fault = self.fault_tick == Some(reply.tick);
         let (addr, len, value) = match reply.data {
             ReplyData::Register { addr, len, value } => (addr, len, Some(value)),
@@ -254,60 +290,42 @@ impl RegDevice {
             if c.read != Some(addr) || c.len != len {
                 continue;
             }
-            let units = value.and_then(|bits| {
-                let raw = c.decode_raw(bits);
-                if raw < c.read_range.0 || raw > c.read_range.1 {
+            let units = match value.map(|bits| c.decode_raw(bits)) {
+                None => None,
+                Some(raw) if raw < c.read_range.0 || raw > c.read_range.1 => {
                     self.range_rejects += 1;
-                    return None;
+                    None
                 }
-                self.last[i] = Some(raw);
-                seen(i, raw);
-                Some(c.to_units(raw))
-            });
-            let _ = out.push(Update {
-                channel: i,
-                value: units,
-                fault,
-                tick: reply.tick,
-                t_sample_ns: reply.t_sample_ns,
-            });
+                Some(raw) => {
+                    self.last[i] = Some(raw);
+                    self.family.on_raw(&mut self.table, i, raw);
+                    Some(c.to_units(raw))
+                }
+            };
+            let _ = out.push(Update::from_reply(reply, i, units, fault));
         }
     }
 
-    /// Queues the requests of a safe action.
-    pub fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
+    fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
         match action {
             SafeAction::Hold => match self.hold {
                 Some((i, goal)) if self.last[i].is_some() => {
                     let raw = self.last[i].unwrap_or(0);
                     let c = self.table[i];
-                    let _ = out.push(Request {
-                        cred: self.cred,
-                        op: Op::Write {
-                            addr: goal,
-                            len: c.len,
-                            value: c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1)),
-                        },
-                        tick: ctx.tick,
-                        t_request_ns: ctx.now_ns,
-                    });
+                    let value = c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1));
+                    self.push_write(goal, c.len, value, ctx, out);
                 }
                 // Nothing known to hold: the only safe thing left is to let go.
                 _ => self.safe(SafeAction::TorqueOff, ctx, out),
             },
             SafeAction::TorqueOff => {
-                if let Some((addr, len, value)) = self.torque_off {
-                    let _ = out.push(Request {
-                        cred: self.cred,
-                        op: Op::Write { addr, len, value },
-                        tick: ctx.tick,
-                        t_request_ns: ctx.now_ns,
-                    });
+                if let Some((addr, len, value)) = T::TORQUE_OFF {
+                    self.push_write(addr, len, value, ctx, out);
                 }
             }
             SafeAction::Setpoint { channel, value } => {
                 self.pending.iter_mut().for_each(|p| *p = None);
-                self.write(channel, value);
+                self.write(channel, value, ctx);
                 self.flush(ctx, out);
             }
         }
@@ -319,18 +337,9 @@ mod tests {
     use super::*;
 
     fn ch(encoding: Encoding, len: u8) -> RegChannel {
-        RegChannel {
-            name: "x",
-            units: "",
-            read: Some(0),
-            write: Some(0),
-            len,
-            encoding,
-            scale: 1.0,
-            offset: 0,
-            read_range: (i64::MIN, i64::MAX),
-            write_range: (-5000, 5000),
-        }
+        RegChannel::new("x", "", len, encoding)
+            .reads(0, (i64::MIN, i64::MAX))
+            .writes(0, (-5000, 5000))
     }
 
     #[test]

@@ -258,10 +258,7 @@ impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
             }
         }
         self.expire_acks();
-        let n = out.len().min(self.rx.len());
-        out[..n].copy_from_slice(&self.rx.as_slice()[..n]);
-        self.rx.consume(n);
-        Ok(n)
+        Ok(self.rx.pop_into(out))
     }
 
     fn shutdown(&mut self) {

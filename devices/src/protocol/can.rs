@@ -159,34 +159,19 @@ impl CanMotorProtocol {
                         self.counters.packets_in += 1;
                         if let Some(fault) = rep.extra.and_then(|e| e.fault) {
                             self.counters.device_errors += 1;
-                            let _ = out.push(Reply {
-                                cred,
-                                data: ReplyData::DeviceError {
-                                    code: fault.code() as u32,
-                                },
-                                tick: p.tick,
-                                t_sample_ns: p.t_request_ns,
-                            });
+                            let _ = out.push(p.reply(ReplyData::DeviceError {
+                                code: fault.code() as u32,
+                            }));
                         }
-                        let _ = out.push(Reply {
-                            cred,
-                            data: ReplyData::Mit {
-                                p: rep.p,
-                                v: rep.v,
-                                t: rep.t,
-                            },
-                            tick: p.tick,
-                            t_sample_ns: p.t_request_ns,
-                        });
+                        let _ = out.push(p.reply(ReplyData::Mit {
+                            p: rep.p,
+                            v: rep.v,
+                            t: rep.t,
+                        }));
                     }
                     Err(_) => {
                         self.counters.rejected_packets += 1;
-                        let _ = out.push(Reply {
-                            cred,
-                            data: ReplyData::Missing { op: p.op },
-                            tick: p.tick,
-                            t_sample_ns: p.t_request_ns,
-                        });
+                        let _ = out.push(p.reply(ReplyData::Missing { op: p.op }));
                     }
                 }
                 return;
@@ -228,13 +213,9 @@ impl Protocol for CanMotorProtocol {
                 continue;
             };
             if answered
-                && !self.pending.track(Pending {
-                    cred: r.cred,
-                    op: r.op,
-                    tick: r.tick,
-                    t_request_ns: r.t_request_ns,
-                    deadline_ns: ctx.now_ns + self.timeout_ns,
-                })
+                && !self
+                    .pending
+                    .track(Pending::new(r, ctx.now_ns + self.timeout_ns))
             {
                 self.counters.dropped_requests += 1;
                 continue;

@@ -2,9 +2,12 @@
 //! become SYNC WRITEs (one per register); reads become one BULK READ (MX series) or, for
 //! servos without it (AX), one READ per bus window, round robin over the devices.
 
-use conductor_protocols::dynamixel1::{self as dxl, BulkReadEntry, ErrorBits, Scanner, Status};
+use conductor_protocols::dynamixel1::{
+    self as dxl, BulkReadEntry, Dxl1Framing, ErrorBits, Packet, Status,
+};
 
-use super::register::{Core, Entry, StatusErr, Timing};
+use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
+use super::register_stage::{Dialect, ReadTxn, Stage};
 use crate::message::{Reply, Request};
 use crate::queue::Bounded;
 use crate::stage::{Protocol, ProtocolCounters, TickCtx};
@@ -20,22 +23,20 @@ pub enum Dxl1ReadMode {
 
 /// Dynamixel 1.0 protocol stage. Word = byte.
 pub struct Dxl1Protocol {
-    core: Core,
-    mode: Dxl1ReadMode,
-    scanner: Box<Scanner<512>>,
-    pkt: Vec<u8>,
-    group: Vec<(u8, i64)>,
-    data: Vec<(u8, [u8; 4])>,
-    entries: Vec<Entry>,
-    unsolicited: u64,
+    stage: Stage<Dxl1, 512>,
 }
 
 impl std::fmt::Debug for Dxl1Protocol {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Dxl1Protocol")
-            .field("mode", &self.mode)
+            .field("mode", &self.stage.dialect().mode)
             .finish()
     }
+}
+
+/// What Protocol 1.0 adds to the register-bus stage.
+struct Dxl1 {
+    mode: Dxl1ReadMode,
 }
 
 /// Bits meaning the instruction was not carried out (its data is not to be trusted).
@@ -45,26 +46,77 @@ impl Dxl1Protocol {
     /// A stage for up to `devices` servos and `in_flight` read requests.
     pub fn new(timing: Timing, mode: Dxl1ReadMode, devices: usize, in_flight: usize) -> Self {
         let devices = devices.clamp(1, 254);
+        let dialect = Dxl1 { mode };
         Self {
-            core: Core::new(timing, dxl::MAX_DEVICE_ID, devices, in_flight),
-            mode,
-            scanner: Box::new(Scanner::new()),
-            pkt: vec![0; dxl::MAX_PACKET],
-            group: Vec::with_capacity(devices),
-            data: Vec::with_capacity(devices),
-            entries: Vec::with_capacity(devices),
-            unsolicited: 0,
+            stage: Stage::new(
+                dialect,
+                timing,
+                dxl::MAX_DEVICE_ID,
+                devices,
+                in_flight,
+                dxl::MAX_PACKET,
+            ),
         }
     }
+}
 
-    fn emit(&mut self, n: usize, out: &mut Bounded<u8>) -> bool {
-        if out.remaining() < n {
-            return false;
+impl Dialect for Dxl1 {
+    type Framing = Dxl1Framing;
+
+    fn single(&self) -> bool {
+        self.mode == Dxl1ReadMode::Single
+    }
+
+    fn sync_write(
+        &mut self,
+        buf: &mut [u8],
+        addr: u16,
+        len: u8,
+        values: &[(u8, [u8; 4])],
+    ) -> Option<usize> {
+        let addr = u8::try_from(addr).ok()?;
+        let l = len as usize;
+        dxl::sync_write(buf, addr, len, values.iter().map(|(id, b)| (*id, &b[..l]))).ok()
+    }
+
+    fn read(&mut self, buf: &mut [u8], entries: &[Entry], _shape: ReadShape) -> Option<ReadTxn> {
+        let fits = entries
+            .iter()
+            .all(|e| e.addr <= 255 && e.len <= 255 && e.len > 0);
+        if !fits {
+            return None;
         }
-        out.extend_from_slice(&self.pkt[..n]);
-        self.core.counters.packets_out += 1;
-        self.core.counters.words_out += n as u64;
-        true
+        let bytes = if self.single() {
+            let e = entries.first()?;
+            dxl::read(buf, e.id, e.addr as u8, e.len as u8)
+        } else {
+            dxl::bulk_read(
+                buf,
+                entries.iter().map(|e| BulkReadEntry {
+                    len: e.len as u8,
+                    id: e.id,
+                    addr: e.addr as u8,
+                }),
+            )
+        }
+        .ok()?;
+        Some(ReadTxn {
+            bytes,
+            fast: false,
+            // Status: FF FF ID LEN ERR data… CHK.
+            reply_bytes: entries.iter().map(|e| 6 + e.len as usize).sum(),
+            replies: entries.len(),
+        })
+    }
+
+    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, out: &mut Bounded<Reply>) {
+        let s = Status::from_packet(&p);
+        let err = StatusErr {
+            failed: s.error.0 & FAILED != 0,
+            alert: s.error.0 & !FAILED != 0,
+            code: s.error.0,
+        };
+        core.on_status(s.id, err, s.data, out);
     }
 }
 
@@ -72,116 +124,19 @@ impl Protocol for Dxl1Protocol {
     type Word = u8;
 
     fn encode(&mut self, requests: &[Request], out: &mut Bounded<u8>, ctx: TickCtx) {
-        self.core.absorb(requests);
-        if !self.core.has_work() || !self.core.bus_free(ctx.now_ns) {
-            return;
-        }
-        while let Some((addr, len)) = self.core.take_write_group(&mut self.group) {
-            self.data.clear();
-            for &(id, v) in &self.group {
-                self.data.push((id, (v as u32).to_le_bytes()));
-            }
-            let l = len as usize;
-            let res = u8::try_from(addr).ok().map(|a| {
-                dxl::sync_write(
-                    &mut self.pkt,
-                    a,
-                    len,
-                    self.data.iter().map(|(id, b)| (*id, &b[..l])),
-                )
-            });
-            match res {
-                Some(Ok(n)) if self.emit(n, out) => self.core.occupy(ctx.now_ns, n),
-                _ => self.core.drop_writes(self.group.len()),
-            }
-        }
-        let single = self.mode == Dxl1ReadMode::Single;
-        if self.core.plan_reads(single, &mut self.entries).is_none() {
-            return;
-        }
-        let fits = self
-            .entries
-            .iter()
-            .all(|e| e.addr <= 255 && e.len <= 255 && e.len > 0);
-        let res = if !fits {
-            None
-        } else if single {
-            let e = self.entries[0];
-            Some(dxl::read(&mut self.pkt, e.id, e.addr as u8, e.len as u8))
-        } else {
-            Some(dxl::bulk_read(
-                &mut self.pkt,
-                self.entries.iter().map(|e| BulkReadEntry {
-                    len: e.len as u8,
-                    id: e.id,
-                    addr: e.addr as u8,
-                }),
-            ))
-        };
-        let entries = std::mem::take(&mut self.entries);
-        match res {
-            Some(Ok(n)) if self.emit(n, out) => {
-                // Status: FF FF ID LEN ERR data… CHK.
-                let reply: usize = entries.iter().map(|e| 6 + e.len as usize).sum();
-                self.core
-                    .start_txn(&entries, false, ctx.now_ns, n, reply, entries.len());
-            }
-            _ => self.core.abandon_reads(&entries),
-        }
-        self.entries = entries;
+        self.stage.encode(requests, out, ctx);
     }
 
-    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, ctx: TickCtx) {
-        self.core.counters.words_in += words.len() as u64;
-        let Self {
-            core,
-            scanner,
-            unsolicited,
-            ..
-        } = self;
-        scanner.feed(words, |p| {
-            let s = Status::from_packet(&p);
-            let err = StatusErr {
-                failed: s.error.0 & FAILED != 0,
-                alert: s.error.0 & !FAILED != 0,
-                code: s.error.0,
-            };
-            if !core.on_status(s.id, err, s.data, ctx, out) {
-                *unsolicited += 1;
-            }
-        });
+    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, _ctx: TickCtx) {
+        self.stage.decode(words, out);
     }
 
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
-        let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
-        if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
-            let Self {
-                core,
-                scanner,
-                unsolicited,
-                ..
-            } = self;
-            scanner.expire_with(|p| {
-                let s = Status::from_packet(&p);
-                let err = StatusErr {
-                    failed: s.error.0 & FAILED != 0,
-                    alert: s.error.0 & !FAILED != 0,
-                    code: s.error.0,
-                };
-                if !core.on_status(s.id, err, s.data, ctx, out) {
-                    *unsolicited += 1;
-                }
-            });
-        }
-        self.core.expire(ctx.now_ns, out);
+        self.stage.expire(out, ctx);
     }
 
     fn counters(&self) -> ProtocolCounters {
-        let s = self.scanner.stats();
-        let mut c = self.core.counters;
-        c.discarded_words = s.discarded_bytes();
-        c.rejected_packets += s.rejected_packets() + self.unsolicited;
-        c
+        self.stage.counters()
     }
 }
 
@@ -191,12 +146,7 @@ mod tests {
     use crate::message::{Credential, Op, ReplyData};
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
-        Request {
-            cred: Credential::id(id),
-            op,
-            tick,
-            t_request_ns: tick * 1_000_000,
-        }
+        Request::new(Credential::id(id), op, ctx(tick))
     }
 
     fn ctx(tick: u64) -> TickCtx {

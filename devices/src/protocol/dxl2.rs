@@ -3,10 +3,13 @@
 //! devices read different spans), and matches status packets back to the requests.
 
 use conductor_protocols::dynamixel2::{
-    self as dxl, BulkReadEntry, FastReply, Packet, Scanner, Status,
+    self as dxl, BulkReadEntry, Dxl2Framing, FastReply, Packet, Status,
 };
 
+use conductor_protocols::scan::ScanStats;
+
 use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
+use super::register_stage::{Dialect, ReadTxn, Stage};
 use crate::message::{Reply, Request};
 use crate::queue::Bounded;
 use crate::stage::{Protocol, ProtocolCounters, TickCtx};
@@ -25,150 +28,62 @@ const MAX_PACKET: usize = 1024;
 
 /// Dynamixel 2.0 protocol stage. Word = byte.
 pub struct Dxl2Protocol {
-    core: Core,
-    mode: Dxl2ReadMode,
-    scanner: Box<Scanner<MAX_PACKET>>,
-    pkt: Vec<u8>,
-    group: Vec<(u8, i64)>,
-    data: Vec<(u8, [u8; 4])>,
-    entries: Vec<Entry>,
-    bulk: Vec<BulkReadEntry>,
-    ids: Vec<u8>,
-    lens: Vec<usize>,
-    unsolicited: u64,
+    stage: Stage<Dxl2, MAX_PACKET>,
 }
 
 impl std::fmt::Debug for Dxl2Protocol {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Dxl2Protocol")
-            .field("mode", &self.mode)
+            .field("mode", &self.mode())
             .field("counters", &self.counters())
             .finish()
     }
+}
+
+/// What Protocol 2.0 adds to the register-bus stage.
+struct Dxl2 {
+    mode: Dxl2ReadMode,
+    bulk: Vec<BulkReadEntry>,
+    ids: Vec<u8>,
+    /// Entry lengths of the open fast read, to split its combined reply.
+    lens: Vec<usize>,
 }
 
 impl Dxl2Protocol {
     /// A stage for up to `devices` servos and `in_flight` read requests per transaction.
     pub fn new(timing: Timing, mode: Dxl2ReadMode, devices: usize, in_flight: usize) -> Self {
         let devices = devices.clamp(1, 253);
-        Self {
-            core: Core::new(timing, dxl::MAX_DEVICE_ID, devices, in_flight),
+        let dialect = Dxl2 {
             mode,
-            scanner: Box::new(Scanner::new()),
-            pkt: vec![0; MAX_PACKET],
-            group: Vec::with_capacity(devices),
-            data: Vec::with_capacity(devices),
-            entries: Vec::with_capacity(devices),
             bulk: Vec::with_capacity(devices),
             ids: Vec::with_capacity(devices),
             lens: Vec::with_capacity(devices),
-            unsolicited: 0,
+        };
+        Self {
+            stage: Stage::new(
+                dialect,
+                timing,
+                dxl::MAX_DEVICE_ID,
+                devices,
+                in_flight,
+                MAX_PACKET,
+            ),
         }
     }
 
     /// The configured read mode.
     pub fn mode(&self) -> Dxl2ReadMode {
-        self.mode
+        self.stage.dialect().mode
     }
 
     /// The scanner's discard statistics.
-    pub fn scan_stats(&self) -> conductor_protocols::scan::ScanStats {
-        *self.scanner.stats()
+    pub fn scan_stats(&self) -> ScanStats {
+        *self.stage.scan_stats()
     }
 
     /// Valid status packets nobody was waiting for (late, duplicated or foreign).
     pub fn unsolicited(&self) -> u64 {
-        self.unsolicited
-    }
-
-    fn emit(&mut self, n: usize, out: &mut Bounded<u8>) -> bool {
-        if out.remaining() < n {
-            return false;
-        }
-        out.extend_from_slice(&self.pkt[..n]);
-        self.core.counters.packets_out += 1;
-        self.core.counters.words_out += n as u64;
-        true
-    }
-
-    fn send_writes(&mut self, out: &mut Bounded<u8>, now_ns: u64) {
-        while let Some((addr, len)) = self.core.take_write_group(&mut self.group) {
-            self.data.clear();
-            for &(id, v) in &self.group {
-                self.data.push((id, (v as u32).to_le_bytes()));
-            }
-            let l = len as usize;
-            let res = dxl::sync_write(
-                &mut self.pkt,
-                addr,
-                len as u16,
-                self.data.iter().map(|(id, b)| (*id, &b[..l])),
-            );
-            match res {
-                Ok(n) if self.emit(n, out) => self.core.occupy(now_ns, n),
-                _ => self.core.drop_writes(self.group.len()),
-            }
-        }
-    }
-
-    fn send_reads(&mut self, out: &mut Bounded<u8>, now_ns: u64) {
-        let Some(shape) = self.core.plan_reads(false, &mut self.entries) else {
-            return;
-        };
-        let fast = self.mode == Dxl2ReadMode::Fast;
-        let n = self.entries.len();
-        let res = match shape {
-            ReadShape::Uniform => {
-                let (addr, len) = (self.entries[0].addr, self.entries[0].len);
-                self.ids.clear();
-                self.ids.extend(self.entries.iter().map(|e| e.id));
-                if fast {
-                    dxl::fast_sync_read(&mut self.pkt, addr, len, &self.ids)
-                } else {
-                    dxl::sync_read(&mut self.pkt, addr, len, &self.ids)
-                }
-            }
-            ReadShape::Mixed => {
-                self.bulk.clear();
-                self.bulk.extend(self.entries.iter().map(|e| BulkReadEntry {
-                    id: e.id,
-                    addr: e.addr,
-                    len: e.len,
-                }));
-                if fast {
-                    dxl::fast_bulk_read(&mut self.pkt, self.bulk.iter().copied())
-                } else {
-                    dxl::bulk_read(&mut self.pkt, self.bulk.iter().copied())
-                }
-            }
-        };
-        let reply_bytes = if fast {
-            // Each slice: ERR ID DATA CRC; plus header, ID, LEN, INST.
-            8 + self
-                .entries
-                .iter()
-                .map(|e| 4 + e.len as usize)
-                .sum::<usize>()
-        } else {
-            self.entries
-                .iter()
-                .map(|e| dxl::status_len(e.len as usize))
-                .sum()
-        };
-        let replies = if fast { 1 } else { n };
-        match res {
-            Ok(k) if self.emit(k, out) => {
-                let entries = std::mem::take(&mut self.entries);
-                self.core
-                    .start_txn(&entries, fast, now_ns, k, reply_bytes, replies);
-                self.entries = entries;
-            }
-            _ => {
-                let entries = std::mem::take(&mut self.entries);
-                self.core.abandon_reads(&entries);
-                self.entries = entries;
-            }
-        }
+        self.stage.unsolicited()
     }
 }
 
@@ -181,51 +96,100 @@ fn status_err(e: dxl::ErrorByte) -> StatusErr {
     }
 }
 
-fn handle_packet(
-    core: &mut Core,
-    lens: &mut Vec<usize>,
-    unsolicited: &mut u64,
-    p: Packet<'_>,
-    ctx: TickCtx,
-    out: &mut Bounded<Reply>,
-) {
-    if !p.is_status() {
-        // An instruction packet: the echo of an adapter that hears itself. Not ours to answer.
-        return;
+impl Dialect for Dxl2 {
+    type Framing = Dxl2Framing;
+
+    fn single(&self) -> bool {
+        false
     }
-    if p.id == dxl::BROADCAST_ID {
-        let Ok(fr) = FastReply::from_packet(&p) else {
-            core.counters.rejected_packets += 1;
-            return;
+
+    fn sync_write(
+        &mut self,
+        buf: &mut [u8],
+        addr: u16,
+        len: u8,
+        values: &[(u8, [u8; 4])],
+    ) -> Option<usize> {
+        let l = len as usize;
+        let entries = values.iter().map(|(id, b)| (*id, &b[..l]));
+        dxl::sync_write(buf, addr, len as u16, entries).ok()
+    }
+
+    fn read(&mut self, buf: &mut [u8], entries: &[Entry], shape: ReadShape) -> Option<ReadTxn> {
+        let fast = self.mode == Dxl2ReadMode::Fast;
+        let bytes = match shape {
+            ReadShape::Uniform => {
+                let first = entries.first()?;
+                self.ids.clear();
+                self.ids.extend(entries.iter().map(|e| e.id));
+                if fast {
+                    dxl::fast_sync_read(buf, first.addr, first.len, &self.ids)
+                } else {
+                    dxl::sync_read(buf, first.addr, first.len, &self.ids)
+                }
+            }
+            ReadShape::Mixed => {
+                self.bulk.clear();
+                self.bulk.extend(entries.iter().map(|e| BulkReadEntry {
+                    id: e.id,
+                    addr: e.addr,
+                    len: e.len,
+                }));
+                if fast {
+                    dxl::fast_bulk_read(buf, self.bulk.iter().copied())
+                } else {
+                    dxl::bulk_read(buf, self.bulk.iter().copied())
+                }
+            }
+        }
+        .ok()?;
+        let (reply_bytes, replies) = if fast {
+            // Each slice: ERR ID DATA CRC; plus header, ID, LEN, INST.
+            let slices: usize = entries.iter().map(|e| 4 + e.len as usize).sum();
+            (8 + slices, 1)
+        } else {
+            let packets = entries.iter().map(|e| dxl::status_len(e.len as usize));
+            (packets.sum(), entries.len())
         };
-        if !core.fast_lens(lens) {
-            *unsolicited += 1;
+        Some(ReadTxn {
+            bytes,
+            fast,
+            reply_bytes,
+            replies,
+        })
+    }
+
+    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, out: &mut Bounded<Reply>) {
+        if !p.is_status() {
+            // An instruction packet: the echo of an adapter that hears itself. Not ours to answer.
             return;
         }
-        for s in fr.slices(lens.iter().copied()) {
-            match s {
-                Ok(s) => {
-                    if !core.on_status(s.id, status_err(s.error), s.data, ctx, out) {
-                        *unsolicited += 1;
+        if p.id == dxl::BROADCAST_ID {
+            let Ok(fr) = FastReply::from_packet(&p) else {
+                core.counters.rejected_packets += 1;
+                return;
+            };
+            if !core.fast_lens(&mut self.lens) {
+                core.unsolicited += 1;
+                return;
+            }
+            for s in fr.slices(self.lens.iter().copied()) {
+                match s {
+                    Ok(s) => core.on_status(s.id, status_err(s.error), s.data, out),
+                    Err(_) => {
+                        // The slices after a bad embedded CRC cannot be trusted; their requests
+                        // expire as missing.
+                        core.counters.rejected_packets += 1;
+                        break;
                     }
                 }
-                Err(_) => {
-                    // The slices after a bad embedded CRC cannot be trusted; their requests
-                    // expire as missing.
-                    core.counters.rejected_packets += 1;
-                    break;
-                }
             }
+            return;
         }
-        return;
-    }
-    match Status::from_packet(&p) {
-        Ok(s) => {
-            if !core.on_status(s.id, status_err(s.error), s.data, ctx, out) {
-                *unsolicited += 1;
-            }
+        match Status::from_packet(&p) {
+            Ok(s) => core.on_status(s.id, status_err(s.error), s.data, out),
+            Err(_) => core.counters.rejected_packets += 1,
         }
-        Err(_) => core.counters.rejected_packets += 1,
     }
 }
 
@@ -233,51 +197,19 @@ impl Protocol for Dxl2Protocol {
     type Word = u8;
 
     fn encode(&mut self, requests: &[Request], out: &mut Bounded<u8>, ctx: TickCtx) {
-        self.core.absorb(requests);
-        if !self.core.has_work() || !self.core.bus_free(ctx.now_ns) {
-            return;
-        }
-        self.send_writes(out, ctx.now_ns);
-        self.send_reads(out, ctx.now_ns);
+        self.stage.encode(requests, out, ctx);
     }
 
-    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, ctx: TickCtx) {
-        self.core.counters.words_in += words.len() as u64;
-        let Self {
-            core,
-            scanner,
-            lens,
-            unsolicited,
-            ..
-        } = self;
-        scanner.feed(words, |p| {
-            handle_packet(core, lens, unsolicited, p, ctx, out);
-        });
+    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, _ctx: TickCtx) {
+        self.stage.decode(words, out);
     }
 
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
-        let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
-        if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
-            // The line is quiet for the oldest transaction: a partial packet will never
-            // complete. Packets complete behind it still count.
-            let Self {
-                core,
-                scanner,
-                lens,
-                unsolicited,
-                ..
-            } = self;
-            scanner.expire_with(|p| handle_packet(core, lens, unsolicited, p, ctx, out));
-        }
-        self.core.expire(ctx.now_ns, out);
+        self.stage.expire(out, ctx);
     }
 
     fn counters(&self) -> ProtocolCounters {
-        let s = self.scanner.stats();
-        let mut c = self.core.counters;
-        c.discarded_words = s.discarded_bytes();
-        c.rejected_packets += s.rejected_packets() + self.unsolicited;
-        c
+        self.stage.counters()
     }
 }
 
@@ -287,12 +219,7 @@ mod tests {
     use crate::message::{Credential, Op, ReplyData};
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
-        Request {
-            cred: Credential::id(id),
-            op,
-            tick,
-            t_request_ns: tick * 100_000,
-        }
+        Request::new(Credential::id(id), op, ctx(tick))
     }
 
     fn ctx(tick: u64) -> TickCtx {

@@ -6,11 +6,16 @@
 //! | [`Dxl2Protocol`] | `u8` | goal writes → one SYNC WRITE per register; reads → one SYNC READ / FAST SYNC READ (BULK / FAST BULK READ for mixed spans) |
 //! | [`Dxl1Protocol`] | `u8` | writes → SYNC WRITE per register; reads → one BULK READ (MX) or one READ per bus window (AX) |
 //! | [`CanMotorProtocol`] | CAN frame | one frame per device and tick (MIT command, ODrive message or RTR request), all sent together |
+//!
+//! The two Dynamixel stages are one stage (`register_stage`) over one bus core (`register`:
+//! queues, coalescing, transactions, deadlines, reply matching); each protocol adds only its
+//! dialect: the encoders, the read instruction, the scanner and how its error byte reads.
 
 mod can;
 mod dxl1;
 mod dxl2;
 mod register;
+mod register_stage;
 
 pub use can::{
     mit_limits, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError, MIT_MODELS,

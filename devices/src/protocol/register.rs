@@ -16,7 +16,7 @@
 
 use crate::message::{Credential, Op, Reply, ReplyData, Request};
 use crate::queue::Bounded;
-use crate::stage::{ProtocolCounters, TickCtx};
+use crate::stage::ProtocolCounters;
 
 /// Nanoseconds to send `bytes` 8N1 bytes (10 bits each) at `baud`.
 pub fn wire_ns(bytes: usize, baud: u32) -> u64 {
@@ -54,6 +54,16 @@ impl Waiter {
 
     fn end(&self) -> u16 {
         self.addr + self.len as u16
+    }
+
+    /// The answer that this read went unanswered.
+    fn missing(&self) -> Reply {
+        Reply {
+            cred: self.cred,
+            data: ReplyData::Missing { op: self.op() },
+            tick: self.tick,
+            t_sample_ns: self.t_request_ns,
+        }
     }
 }
 
@@ -125,6 +135,8 @@ pub(crate) struct Core {
     bus_free_at: u64,
     rr: u8,
     pub counters: ProtocolCounters,
+    /// Valid status packets nobody was waiting for (late, duplicated or foreign).
+    pub unsolicited: u64,
 }
 
 impl Core {
@@ -153,6 +165,7 @@ impl Core {
             bus_free_at: 0,
             rr: 0,
             counters: ProtocolCounters::default(),
+            unsolicited: 0,
         }
     }
 
@@ -329,12 +342,7 @@ impl Core {
                 return true;
             }
             counters.dropped_requests += 1;
-            let _ = early.push(Reply {
-                cred: w.cred,
-                data: ReplyData::Missing { op: w.op() },
-                tick: w.tick,
-                t_sample_ns: w.t_request_ns,
-            });
+            let _ = early.push(w.missing());
             false
         });
     }
@@ -414,13 +422,20 @@ impl Core {
             .min_by_key(|x| x.seq)
     }
 
-    /// A status packet from `id`, in wire order. Returns false if nobody was waiting for it.
-    pub fn on_status(
+    /// A status packet from `id`, in wire order; counted as unsolicited if nobody was waiting
+    /// for it.
+    pub fn on_status(&mut self, id: u8, err: StatusErr, data: &[u8], out: &mut Bounded<Reply>) {
+        if !self.match_status(id, err, data, out) {
+            self.unsolicited += 1;
+        }
+    }
+
+    /// [`on_status`](Self::on_status); false if nobody was waiting for the packet.
+    fn match_status(
         &mut self,
         id: u8,
         err: StatusErr,
         data: &[u8],
-        ctx: TickCtx,
         out: &mut Bounded<Reply>,
     ) -> bool {
         // The oldest open transaction still expecting `id`.
@@ -495,7 +510,6 @@ impl Core {
         if x.entries.iter().all(|e| e.done) {
             x.active = false;
         }
-        let _ = ctx;
         true
     }
 
@@ -541,12 +555,7 @@ impl Txn {
                 continue;
             }
             n += 1;
-            let _ = out.push(Reply {
-                cred: w.cred,
-                data: ReplyData::Missing { op: w.op() },
-                tick: w.tick,
-                t_sample_ns: w.t_request_ns,
-            });
+            let _ = out.push(w.missing());
         }
         self.active = false;
         n

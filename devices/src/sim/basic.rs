@@ -80,13 +80,9 @@ impl Protocol for SimProtocol {
                 }
             };
             if word.kind == SimKind::Sample
-                && !self.outstanding.track(Pending {
-                    cred: r.cred,
-                    op: r.op,
-                    tick: r.tick,
-                    t_request_ns: r.t_request_ns,
-                    deadline_ns: ctx.now_ns + self.timeout_ns,
-                })
+                && !self
+                    .outstanding
+                    .track(Pending::new(r, ctx.now_ns + self.timeout_ns))
             {
                 self.counters.dropped_requests += 1;
                 continue;
@@ -110,12 +106,7 @@ impl Protocol for SimProtocol {
             match self.outstanding.resolve(w.cred, |op| *op == Op::Sample) {
                 Some(p) => {
                     self.counters.packets_in += 1;
-                    let _ = out.push(Reply {
-                        cred: w.cred,
-                        data: ReplyData::Value(w.value),
-                        tick: p.tick,
-                        t_sample_ns: p.t_request_ns,
-                    });
+                    let _ = out.push(p.reply(ReplyData::Value(w.value)));
                 }
                 None => {
                     // An answer nobody asked for (or already given up on).
@@ -185,10 +176,7 @@ impl Hardware for SineHardware {
     }
 
     fn receive(&mut self, out: &mut [SimWord], _ctx: TickCtx) -> Result<usize, HwError> {
-        let n = out.len().min(self.replies.len());
-        out[..n].copy_from_slice(&self.replies.as_slice()[..n]);
-        self.replies.consume(n);
-        Ok(n)
+        Ok(self.replies.pop_into(out))
     }
 }
 
@@ -274,19 +262,11 @@ impl Hardware for LoopbackHardware {
     }
 
     fn receive(&mut self, out: &mut [SimWord], _ctx: TickCtx) -> Result<usize, HwError> {
-        let n = out.len().min(self.replies.len());
-        out[..n].copy_from_slice(&self.replies.as_slice()[..n]);
-        self.replies.consume(n);
-        Ok(n)
+        Ok(self.replies.pop_into(out))
     }
 }
 
-const SIM_CHANNELS: [Channel; 1] = [Channel {
-    name: "value",
-    units: "",
-    readable: true,
-    writable: true,
-}];
+const SIM_CHANNELS: [Channel; 1] = [Channel::read_write("value", "")];
 
 /// A device on the simulated bus with one read/write channel, `value`.
 #[derive(Debug)]
@@ -317,12 +297,7 @@ impl Device for SimDevice {
     }
 
     fn sample(&mut self, _channel: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
-        let _ = out.push(Request {
-            cred: self.cred,
-            op: Op::Sample,
-            tick: ctx.tick,
-            t_request_ns: ctx.now_ns,
-        });
+        let _ = out.push(Request::new(self.cred, Op::Sample, ctx));
     }
 
     fn write(&mut self, _channel: usize, value: f64, _ctx: TickCtx) {
@@ -331,12 +306,7 @@ impl Device for SimDevice {
 
     fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
         if let Some(value) = self.pending.take() {
-            let _ = out.push(Request {
-                cred: self.cred,
-                op: Op::Set { value },
-                tick: ctx.tick,
-                t_request_ns: ctx.now_ns,
-            });
+            let _ = out.push(Request::new(self.cred, Op::Set { value }, ctx));
         }
     }
 
@@ -349,13 +319,7 @@ impl Device for SimDevice {
             ReplyData::Missing { .. } => None,
             _ => return,
         };
-        let _ = out.push(Update {
-            channel: 0,
-            value,
-            fault: false,
-            tick: reply.tick,
-            t_sample_ns: reply.t_sample_ns,
-        });
+        let _ = out.push(Update::from_reply(reply, 0, value, false));
     }
 
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {

@@ -172,6 +172,12 @@ impl SimServo {
             return;
         };
         if now_ns <= t0 {
+            // No time has passed (instructions that arrived in one chunk share a time stamp):
+            // only an instant response (tau 0) in a position mode has moved.
+            if tau_s <= 0.0 && self.torque_on() && !matches!(self.table[11], 0 | 1 | 16) {
+                self.pos = self.goal_position() as f64;
+                self.publish(0.0);
+            }
             return;
         }
         let dt = (now_ns - t0) as f64 * 1e-9;

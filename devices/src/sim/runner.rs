@@ -176,10 +176,41 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 /// A simulator running in its own thread.
 pub struct Running<S> {
     sim: Arc<Mutex<S>>,
-    faults: Arc<Mutex<(FaultTotals, FaultTotals)>>,
+    faults: Arc<Faults>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     endpoint: String,
+}
+
+/// Fault totals of a simulator thread: (host → simulator, simulator → host).
+type Faults = Mutex<(FaultTotals, FaultTotals)>;
+
+impl<S: Send + 'static> Running<S> {
+    /// Runs `serve` in a thread named `name`, on `ep`, with the simulator and the fault totals
+    /// it shares with the handle, and the flag that tells it to stop.
+    fn spawn(
+        name: &str,
+        ep: Endpoint,
+        sim: S,
+        serve: impl FnOnce(Io, &Mutex<S>, &Faults, &AtomicBool) + Send + 'static,
+    ) -> Self {
+        let endpoint = ep.describe();
+        let sim = Arc::new(Mutex::new(sim));
+        let faults = Arc::new(Faults::default());
+        let stop = Arc::new(AtomicBool::new(false));
+        let (s2, f2, st2) = (sim.clone(), faults.clone(), stop.clone());
+        let thread = std::thread::Builder::new()
+            .name(name.into())
+            .spawn(move || serve(Io { ep, peer: None }, &s2, &f2, &st2))
+            .expect("spawn simulator thread");
+        Running {
+            sim,
+            faults,
+            stop,
+            thread: Some(thread),
+            endpoint,
+        }
+    }
 }
 
 impl<S> Running<S> {
@@ -225,104 +256,73 @@ pub fn run_dxl(
     down: FaultConfig,
     up: FaultConfig,
 ) -> Running<DxlBusSim> {
-    let endpoint = ep.describe();
-    let sim = Arc::new(Mutex::new(DxlBusSim::new(cfg)));
-    let faults = Arc::new(Mutex::new((FaultTotals::default(), FaultTotals::default())));
-    let stop = Arc::new(AtomicBool::new(false));
-    let (s2, f2, st2) = (sim.clone(), faults.clone(), stop.clone());
-    let thread = std::thread::Builder::new()
-        .name("dxl-sim".into())
-        .spawn(move || {
-            let mut io = Io { ep, peer: None };
-            let mut down = FaultInjector::new(down);
-            let mut up = FaultInjector::new(up);
-            let t0 = Instant::now();
-            let now = || t0.elapsed().as_nanos() as u64;
-            let mut queue: std::collections::VecDeque<(u64, Vec<u8>)> = Default::default();
-            let mut buf = vec![0u8; 4096];
-            while !st2.load(Ordering::Relaxed) {
-                // Write what is due; sleep precisely for a reply due within 2 ms.
-                while let Some((ready, _)) = queue.front() {
-                    let t = now();
-                    if *ready > t {
-                        let wait = *ready - t;
-                        if wait > 2_000_000 {
-                            break;
-                        }
-                        std::thread::sleep(Duration::from_nanos(wait));
-                    }
-                    let (_, bytes) = queue.pop_front().unwrap_or_default();
-                    io.write(&bytes);
-                }
-                let timeout = match queue.front() {
-                    Some((ready, _)) => {
-                        Duration::from_nanos(ready.saturating_sub(now()).saturating_sub(2_000_000))
-                    }
-                    None => Duration::from_millis(5),
-                };
-                let n = io.read(&mut buf, timeout);
+    let sim = DxlBusSim::new(cfg);
+    Running::spawn("dxl-sim", ep, sim, move |mut io, sim, faults, stop| {
+        let mut down = FaultInjector::new(down);
+        let mut up = FaultInjector::new(up);
+        let t0 = Instant::now();
+        let now = || t0.elapsed().as_nanos() as u64;
+        let mut queue: std::collections::VecDeque<(u64, Vec<u8>)> = Default::default();
+        let mut buf = vec![0u8; 4096];
+        while !stop.load(Ordering::Relaxed) {
+            // Write what is due; sleep precisely for a reply due within 2 ms.
+            while let Some((ready, _)) = queue.front() {
                 let t = now();
-                let mut sim = lock(&s2);
-                if n == 0 {
-                    sim.advance(t);
-                    continue;
+                if *ready > t {
+                    let wait = *ready - t;
+                    if wait > 2_000_000 {
+                        break;
+                    }
+                    std::thread::sleep(Duration::from_nanos(wait));
                 }
-                let mut chunk = buf[..n].to_vec();
-                down.apply(&mut chunk);
-                sim.feed(&chunk, t, |r| {
-                    let mut b = r.bytes;
-                    let (_, delay) = up.apply(&mut b);
-                    queue.push_back((r.ready_ns + delay, b));
-                });
-                *lock(&f2) = (down.totals(), up.totals());
+                let (_, bytes) = queue.pop_front().unwrap_or_default();
+                io.write(&bytes);
             }
-        })
-        .expect("spawn simulator thread");
-    Running {
-        sim,
-        faults,
-        stop,
-        thread: Some(thread),
-        endpoint,
-    }
+            let timeout = match queue.front() {
+                Some((ready, _)) => {
+                    Duration::from_nanos(ready.saturating_sub(now()).saturating_sub(2_000_000))
+                }
+                None => Duration::from_millis(5),
+            };
+            let n = io.read(&mut buf, timeout);
+            let t = now();
+            let mut sim = lock(sim);
+            if n == 0 {
+                sim.advance(t);
+                continue;
+            }
+            let mut chunk = buf[..n].to_vec();
+            down.apply(&mut chunk);
+            sim.feed(&chunk, t, |r| {
+                let mut b = r.bytes;
+                let (_, delay) = up.apply(&mut b);
+                queue.push_back((r.ready_ns + delay, b));
+            });
+            *lock(faults) = (down.totals(), up.totals());
+        }
+    })
 }
 
 /// Runs an SLCAN adapter on `ep` (answers at once; cyclic node messages every millisecond).
 pub fn run_slcan(ep: Endpoint, adapter: SlcanAdapterSim) -> Running<SlcanAdapterSim> {
-    let endpoint = ep.describe();
-    let sim = Arc::new(Mutex::new(adapter));
-    let faults = Arc::new(Mutex::new((FaultTotals::default(), FaultTotals::default())));
-    let stop = Arc::new(AtomicBool::new(false));
-    let (s2, st2) = (sim.clone(), stop.clone());
-    let thread = std::thread::Builder::new()
-        .name("slcan-sim".into())
-        .spawn(move || {
-            let mut io = Io { ep, peer: None };
-            let t0 = Instant::now();
-            let mut buf = vec![0u8; 4096];
-            let mut out = Vec::with_capacity(4096);
-            while !st2.load(Ordering::Relaxed) {
-                let n = io.read(&mut buf, Duration::from_millis(1));
-                let t = t0.elapsed().as_nanos() as u64;
-                out.clear();
-                {
-                    let mut a = lock(&s2);
-                    if n > 0 {
-                        a.feed(&buf[..n], t, &mut out);
-                    }
-                    a.poll(t, &mut out);
+    Running::spawn("slcan-sim", ep, adapter, |mut io, sim, _faults, stop| {
+        let t0 = Instant::now();
+        let mut buf = vec![0u8; 4096];
+        let mut out = Vec::with_capacity(4096);
+        while !stop.load(Ordering::Relaxed) {
+            let n = io.read(&mut buf, Duration::from_millis(1));
+            let t = t0.elapsed().as_nanos() as u64;
+            out.clear();
+            {
+                let mut a = lock(sim);
+                if n > 0 {
+                    a.feed(&buf[..n], t, &mut out);
                 }
-                if !out.is_empty() {
-                    io.write(&out);
-                }
+                a.poll(t, &mut out);
             }
-        })
-        .expect("spawn simulator thread");
-    Running {
-        sim,
-        faults,
-        stop,
-        thread: Some(thread),
-        endpoint,
-    }
+            if !out.is_empty() {
+                io.write(&out);
+            }
+        }
+    })
 }

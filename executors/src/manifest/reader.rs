@@ -78,28 +78,54 @@ impl<'a, 'i> Table<'a, 'i> {
         );
     }
 
-    /// A string; `None` (with an error) if present but not a string.
-    pub(crate) fn str(&mut self, d: &mut Diags, key: &str) -> Option<At<String>> {
+    /// The value of `key` converted by `convert`; `None` if absent, or (with an error saying
+    /// `expected`) if `convert` refuses it.
+    fn typed<T>(
+        &mut self,
+        d: &mut Diags,
+        key: &str,
+        expected: &str,
+        convert: impl FnOnce(&'a DeValue<'i>) -> Option<T>,
+    ) -> Option<At<T>> {
         let v = self.raw(key)?;
-        match v.get_ref() {
-            DeValue::String(s) => Some(At {
-                value: s.to_string(),
+        match convert(v.get_ref()) {
+            Some(value) => Some(At {
+                value,
                 span: v.span(),
             }),
-            _ => {
-                self.mismatch(d, key, v, "a string");
+            None => {
+                self.mismatch(d, key, v, expected);
                 None
             }
         }
     }
 
-    /// A required string.
-    pub(crate) fn req_str(&mut self, d: &mut Diags, key: &str, what: &str) -> Option<At<String>> {
+    /// `get`, or (with an error saying `expected`) `None` if `key` is absent.
+    fn required<T>(
+        &mut self,
+        d: &mut Diags,
+        key: &str,
+        expected: &str,
+        get: impl FnOnce(&mut Self, &mut Diags) -> Option<T>,
+    ) -> Option<T> {
         if self.span_of(key).is_none() {
-            self.missing(d, key, what);
+            self.missing(d, key, expected);
             return None;
         }
-        self.str(d, key)
+        get(self, d)
+    }
+
+    /// A string; `None` (with an error) if present but not a string.
+    pub(crate) fn str(&mut self, d: &mut Diags, key: &str) -> Option<At<String>> {
+        self.typed(d, key, "a string", |v| match v {
+            DeValue::String(s) => Some(s.to_string()),
+            _ => None,
+        })
+    }
+
+    /// A required string.
+    pub(crate) fn req_str(&mut self, d: &mut Diags, key: &str, what: &str) -> Option<At<String>> {
+        self.required(d, key, what, |t, d| t.str(d, key))
     }
 
     /// A finite number (integers accepted) within `range` (inclusive).
@@ -110,25 +136,8 @@ impl<'a, 'i> Table<'a, 'i> {
         range: (f64, f64),
         expected: &str,
     ) -> Option<At<f64>> {
-        let v = self.raw(key)?;
-        let x = match number(v.get_ref()) {
-            Some(x) => x,
-            None => {
-                self.mismatch(d, key, v, expected);
-                return None;
-            }
-        };
-        if !x.is_finite() || x < range.0 || x > range.1 {
-            d.error(
-                &v.span(),
-                &self.key_path(key),
-                format!("expected {expected}, found {}", describe(v.get_ref())),
-            );
-            return None;
-        }
-        Some(At {
-            value: x,
-            span: v.span(),
+        self.typed(d, key, expected, |v| {
+            number(v).filter(|x| x.is_finite() && *x >= range.0 && *x <= range.1)
         })
     }
 
@@ -140,11 +149,7 @@ impl<'a, 'i> Table<'a, 'i> {
         range: (f64, f64),
         expected: &str,
     ) -> Option<At<f64>> {
-        if self.span_of(key).is_none() {
-            self.missing(d, key, expected);
-            return None;
-        }
-        self.num(d, key, range, expected)
+        self.required(d, key, expected, |t, d| t.num(d, key, range, expected))
     }
 
     /// An integer within `range` (inclusive).
@@ -155,17 +160,9 @@ impl<'a, 'i> Table<'a, 'i> {
         range: (i64, i64),
         expected: &str,
     ) -> Option<At<i64>> {
-        let v = self.raw(key)?;
-        match integer(v.get_ref()) {
-            Some(x) if x >= range.0 && x <= range.1 => Some(At {
-                value: x,
-                span: v.span(),
-            }),
-            _ => {
-                self.mismatch(d, key, v, expected);
-                None
-            }
-        }
+        self.typed(d, key, expected, |v| {
+            integer(v).filter(|x| *x >= range.0 && *x <= range.1)
+        })
     }
 
     /// A required integer.
@@ -176,38 +173,24 @@ impl<'a, 'i> Table<'a, 'i> {
         range: (i64, i64),
         expected: &str,
     ) -> Option<At<i64>> {
-        if self.span_of(key).is_none() {
-            self.missing(d, key, expected);
-            return None;
-        }
-        self.int(d, key, range, expected)
+        self.required(d, key, expected, |t, d| t.int(d, key, range, expected))
     }
 
     /// A boolean.
     pub(crate) fn bool(&mut self, d: &mut Diags, key: &str) -> Option<At<bool>> {
-        let v = self.raw(key)?;
-        match v.get_ref() {
-            DeValue::Boolean(b) => Some(At {
-                value: *b,
-                span: v.span(),
-            }),
-            _ => {
-                self.mismatch(d, key, v, "true or false");
-                None
-            }
-        }
+        self.typed(d, key, "true or false", |v| match v {
+            DeValue::Boolean(b) => Some(*b),
+            _ => None,
+        })
     }
 
     /// A sub-table, or `None` (with an error if present but not a table).
     pub(crate) fn table(&mut self, d: &mut Diags, key: &str) -> Option<Table<'a, 'i>> {
-        let v = self.raw(key)?;
-        match v.get_ref() {
-            DeValue::Table(t) => Some(Table::new(self.key_path(key), t, v.span())),
-            _ => {
-                self.mismatch(d, key, v, "a table");
-                None
-            }
-        }
+        let t = self.typed(d, key, "a table", |v| match v {
+            DeValue::Table(t) => Some(t),
+            _ => None,
+        })?;
+        Some(Table::new(self.key_path(key), t.value, t.span))
     }
 
     /// Every entry of this table as (name, sub-table), in document order; entries that are not

@@ -1,42 +1,8 @@
 //! Packet encoders: each writes one complete packet into `buf` and returns its length.
 
-use super::{checksum, ErrorBits, Instruction, BROADCAST_ID, MAX_DEVICE_ID};
+use super::{checksum, ErrorBits, Instruction, BROADCAST_ID, HEADER, MAX_DEVICE_ID};
+use crate::dynamixel_common::{self as common, EncodeError};
 use crate::writer::Writer;
-use crate::BufferTooSmall;
-
-/// Why a packet could not be encoded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum EncodeError {
-    /// The output buffer cannot hold the packet.
-    #[error("output buffer too small")]
-    BufferTooSmall,
-    /// The ID is not valid here.
-    #[error("invalid ID {0:#04x}")]
-    InvalidId(u8),
-    /// An entry's data length differs from the declared one.
-    #[error("data length {got} where {expected} is required")]
-    DataLength {
-        /// Declared length.
-        expected: usize,
-        /// Supplied length.
-        got: usize,
-    },
-    /// Sync write / bulk read without entries.
-    #[error("no entries")]
-    NoEntries,
-    /// An ID appears twice.
-    #[error("ID {0} listed twice")]
-    DuplicateId(u8),
-    /// More than 253 parameter bytes (LEN is one byte).
-    #[error("packet too long for the length field")]
-    TooLong,
-}
-
-impl From<BufferTooSmall> for EncodeError {
-    fn from(_: BufferTooSmall) -> Self {
-        EncodeError::BufferTooSmall
-    }
-}
 
 struct Builder<'a> {
     w: Writer<'a>,
@@ -45,7 +11,8 @@ struct Builder<'a> {
 impl<'a> Builder<'a> {
     fn new(buf: &'a mut [u8], id: u8, inst: u8) -> Result<Self, EncodeError> {
         let mut w = Writer::new(buf);
-        w.put_all(&[0xFF, 0xFF, id, 0, inst])?;
+        w.put_all(&HEADER)?;
+        w.put_all(&[id, 0, inst])?;
         Ok(Self { w })
     }
 
@@ -63,19 +30,11 @@ impl<'a> Builder<'a> {
 }
 
 fn device_id(id: u8) -> Result<u8, EncodeError> {
-    if id <= MAX_DEVICE_ID {
-        Ok(id)
-    } else {
-        Err(EncodeError::InvalidId(id))
-    }
+    common::device_id(id, MAX_DEVICE_ID)
 }
 
 fn device_or_broadcast(id: u8) -> Result<u8, EncodeError> {
-    if id <= BROADCAST_ID {
-        Ok(id)
-    } else {
-        Err(EncodeError::InvalidId(id))
-    }
+    common::device_or_broadcast(id, MAX_DEVICE_ID)
 }
 
 fn simple(buf: &mut [u8], id: u8, inst: Instruction, params: &[u8]) -> Result<usize, EncodeError> {
@@ -136,26 +95,10 @@ pub fn sync_write<'d>(
 ) -> Result<usize, EncodeError> {
     let mut b = Builder::new(buf, BROADCAST_ID, Instruction::SyncWrite as u8)?;
     b.bytes(&[addr, len])?;
-    let mut seen = [false; 256];
-    let mut any = false;
-    for (id, data) in entries {
-        device_id(id)?;
-        if core::mem::replace(&mut seen[id as usize], true) {
-            return Err(EncodeError::DuplicateId(id));
-        }
-        if data.len() != len as usize {
-            return Err(EncodeError::DataLength {
-                expected: len as usize,
-                got: data.len(),
-            });
-        }
+    common::sync_write_entries(entries, MAX_DEVICE_ID, len as usize, |id, data| {
         b.bytes(&[id])?;
-        b.bytes(data)?;
-        any = true;
-    }
-    if !any {
-        return Err(EncodeError::NoEntries);
-    }
+        b.bytes(data)
+    })?;
     b.finish()
 }
 

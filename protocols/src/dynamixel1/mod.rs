@@ -13,17 +13,17 @@ mod encode;
 mod packet;
 mod scanner;
 
+pub use crate::dynamixel_common::EncodeError;
 pub use encode::{
     action, bulk_read, ping, read, reg_write, reset, status, sync_write, write, BulkReadEntry,
-    EncodeError,
 };
 pub use packet::{parse, ErrorBits, Packet, ParseError, Status};
-pub use scanner::Scanner;
+pub use scanner::{Dxl1Framing, Scanner};
 
 /// The two bytes every packet starts with.
 pub const HEADER: [u8; 2] = [0xFF, 0xFF];
 /// The broadcast ID.
-pub const BROADCAST_ID: u8 = 0xFE;
+pub const BROADCAST_ID: u8 = crate::dynamixel_common::BROADCAST_ID;
 /// The largest device ID.
 pub const MAX_DEVICE_ID: u8 = 0xFD;
 /// Largest packet: LEN is one byte.

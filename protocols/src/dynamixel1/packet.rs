@@ -1,6 +1,7 @@
 //! Single-packet decoding, status packets and the error bits.
 
-use super::{checksum, HEADER};
+use super::{checksum, HEADER, MAX_DEVICE_ID};
+use crate::dynamixel_common::addressable;
 
 /// A checksum-verified packet.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,8 +56,8 @@ pub fn parse(buf: &[u8]) -> Result<(Packet<'_>, usize), ParseError> {
     if buf[..2] != HEADER {
         return Err(ParseError::BadHeader);
     }
-    if buf[2] == 0xFF {
-        return Err(ParseError::BadId(0xFF));
+    if !addressable(buf[2], MAX_DEVICE_ID) {
+        return Err(ParseError::BadId(buf[2]));
     }
     if buf[3] < 2 {
         return Err(ParseError::BadLength(buf[3]));

@@ -1,102 +1,38 @@
 //! Stream scanner for Protocol 1.0.
 
 use super::packet::{decode_checked, Packet};
-use super::{checksum, HEADER, MAX_PACKET};
-use crate::scan::{Engine, Framing, ScanStats};
+use super::{checksum, HEADER, MAX_DEVICE_ID, MAX_PACKET};
+use crate::dynamixel_common::addressable;
+use crate::scan::{Framing, PacketScanner};
 
-struct Dxl1;
+/// The Protocol 1.0 framing: header `FF FF`, ID, one-byte length, checksum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Dxl1Framing;
 
-impl Framing for Dxl1 {
+impl Framing for Dxl1Framing {
+    type Packet<'a> = Packet<'a>;
     const HEADER: &'static [u8] = &HEADER;
     const FIELDS_LEN: usize = 4;
+    const MIN_PACKET: usize = 6;
+    const MAX_PACKET: usize = MAX_PACKET;
 
     fn total_len(f: &[u8]) -> Option<usize> {
-        (f[2] != 0xFF && f[3] >= 2).then_some(4 + f[3] as usize)
+        (addressable(f[2], MAX_DEVICE_ID) && f[3] >= 2).then_some(4 + f[3] as usize)
     }
 
     fn check(p: &[u8]) -> bool {
         let n = p.len();
         checksum(&p[2..n - 1]) == p[n - 1]
     }
+
+    fn decode(frame: &mut [u8]) -> Packet<'_> {
+        decode_checked(frame)
+    }
 }
 
-/// Fixed-capacity Protocol 1.0 stream scanner with discard counters (see [`crate::scan`]).
+/// Fixed-capacity Protocol 1.0 stream scanner with discard counters ([`PacketScanner`]):
+/// packets up to `min(N - 1, 259)` bytes.
 ///
 /// The header `FF FF` is weak (it appears in data), so the checksum does most of the work;
 /// a run of `FF`s before a packet is counted as `bad_header` (ID 0xFF) byte by byte.
-pub struct Scanner<const N: usize = 512> {
-    engine: Engine<N>,
-}
-
-impl<const N: usize> Default for Scanner<N> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl<const N: usize> Scanner<N> {
-    const MIN_CAPACITY: () = assert!(N >= 16, "scanner capacity must be at least 16 bytes");
-
-    /// A scanner accepting packets up to `min(N - 1, 259)` bytes.
-    pub fn new() -> Self {
-        Self::with_max_packet(MAX_PACKET)
-    }
-
-    /// A scanner accepting packets up to `max_packet` bytes (clamped to `N - 1`).
-    pub fn with_max_packet(max_packet: usize) -> Self {
-        #[allow(clippy::let_unit_value)]
-        let () = Self::MIN_CAPACITY;
-        Self {
-            engine: Engine::new(max_packet.clamp(6, MAX_PACKET), HEADER.len()),
-        }
-    }
-
-    /// Copies as many bytes as fit; returns how many were taken.
-    pub fn push(&mut self, bytes: &[u8]) -> usize {
-        self.engine.push(bytes)
-    }
-
-    /// The next checksum-verified packet (borrowed until the next call).
-    pub fn next_packet(&mut self) -> Option<Packet<'_>> {
-        let range = self.engine.next_frame::<Dxl1>()?;
-        Some(decode_checked(&self.engine.buf_mut()[range]))
-    }
-
-    /// No more bytes are coming for what is buffered: see
-    /// [`dynamixel2::Scanner::expire`](crate::dynamixel2::Scanner::expire).
-    pub fn expire(&mut self) {
-        self.engine.expire();
-    }
-
-    /// Pushes all of `bytes`, calling `on_packet` for every packet completed.
-    pub fn feed(&mut self, mut bytes: &[u8], mut on_packet: impl FnMut(Packet<'_>)) {
-        loop {
-            let n = self.push(bytes);
-            bytes = &bytes[n..];
-            while let Some(p) = self.next_packet() {
-                on_packet(p);
-            }
-            if bytes.is_empty() {
-                return;
-            }
-        }
-    }
-
-    /// [`expire`](Self::expire), then drain.
-    pub fn expire_with(&mut self, mut on_packet: impl FnMut(Packet<'_>)) {
-        self.expire();
-        while let Some(p) = self.next_packet() {
-            on_packet(p);
-        }
-    }
-
-    /// Discard counters since creation.
-    pub fn stats(&self) -> &ScanStats {
-        self.engine.stats()
-    }
-
-    /// Bytes accepted but not yet yielded or discarded.
-    pub fn buffered(&self) -> usize {
-        self.engine.buffered()
-    }
-}
+pub type Scanner<const N: usize = 512> = PacketScanner<Dxl1Framing, N>;

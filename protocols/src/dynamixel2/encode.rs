@@ -4,42 +4,8 @@
 use super::crc;
 use super::stuffing::Stuffer;
 use super::{Instruction, BROADCAST_ID, HEADER, MAX_DEVICE_ID};
+use crate::dynamixel_common::{self as common, EncodeError, IdSet};
 use crate::writer::Writer;
-use crate::BufferTooSmall;
-
-/// Why a packet could not be encoded.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum EncodeError {
-    /// The output buffer cannot hold the packet.
-    #[error("output buffer too small")]
-    BufferTooSmall,
-    /// The ID is not a device ID (0–252), or is broadcast where broadcast is not allowed.
-    #[error("invalid ID {0:#04x}")]
-    InvalidId(u8),
-    /// An entry's data length differs from the length the instruction declares.
-    #[error("data length {got} where {expected} is required")]
-    DataLength {
-        /// Length the packet declares.
-        expected: usize,
-        /// Length supplied.
-        got: usize,
-    },
-    /// An ID appears twice in one sync/bulk instruction.
-    #[error("ID {0} listed twice")]
-    DuplicateId(u8),
-    /// A sync/bulk instruction without any entry.
-    #[error("no entries")]
-    NoEntries,
-    /// The packet would exceed the 16-bit length field.
-    #[error("packet too long for the length field")]
-    TooLong,
-}
-
-impl From<BufferTooSmall> for EncodeError {
-    fn from(_: BufferTooSmall) -> Self {
-        EncodeError::BufferTooSmall
-    }
-}
 
 /// Writes header, ID, placeholder length and instruction, then stuffed parameters; `finish`
 /// patches the length and appends the CRC.
@@ -92,34 +58,11 @@ impl<'a> Builder<'a> {
 }
 
 fn device_id(id: u8) -> Result<u8, EncodeError> {
-    if id <= MAX_DEVICE_ID {
-        Ok(id)
-    } else {
-        Err(EncodeError::InvalidId(id))
-    }
+    common::device_id(id, MAX_DEVICE_ID)
 }
 
 fn device_or_broadcast(id: u8) -> Result<u8, EncodeError> {
-    if id <= MAX_DEVICE_ID || id == BROADCAST_ID {
-        Ok(id)
-    } else {
-        Err(EncodeError::InvalidId(id))
-    }
-}
-
-/// 256-bit set for duplicate-ID checks.
-#[derive(Default)]
-struct IdSet([u64; 4]);
-
-impl IdSet {
-    fn insert(&mut self, id: u8) -> Result<(), EncodeError> {
-        let (word, bit) = ((id >> 6) as usize, 1u64 << (id & 63));
-        if self.0[word] & bit != 0 {
-            return Err(EncodeError::DuplicateId(id));
-        }
-        self.0[word] |= bit;
-        Ok(())
-    }
+    common::device_or_broadcast(id, MAX_DEVICE_ID)
 }
 
 fn simple(buf: &mut [u8], id: u8, inst: Instruction, params: &[u8]) -> Result<usize, EncodeError> {
@@ -240,11 +183,12 @@ fn sync_read_like(
     let mut b = Builder::new(buf, BROADCAST_ID, inst as u8, true)?;
     b.u16(addr)?;
     b.u16(len)?;
-    let mut seen = IdSet::default();
-    for &id in ids {
-        seen.insert(device_id(id)?)?;
-        b.byte(id)?;
-    }
+    common::entries(
+        ids.iter().copied(),
+        MAX_DEVICE_ID,
+        |&id| id,
+        |id| b.byte(id),
+    )?;
     b.finish()
 }
 
@@ -273,23 +217,10 @@ pub fn sync_write<'d>(
     let mut b = Builder::new(buf, BROADCAST_ID, Instruction::SyncWrite as u8, true)?;
     b.u16(addr)?;
     b.u16(len)?;
-    let mut seen = IdSet::default();
-    let mut any = false;
-    for (id, data) in entries {
-        seen.insert(device_id(id)?)?;
-        if data.len() != len as usize {
-            return Err(EncodeError::DataLength {
-                expected: len as usize,
-                got: data.len(),
-            });
-        }
+    common::sync_write_entries(entries, MAX_DEVICE_ID, len as usize, |id, data| {
         b.byte(id)?;
-        b.bytes(data)?;
-        any = true;
-    }
-    if !any {
-        return Err(EncodeError::NoEntries);
-    }
+        b.bytes(data)
+    })?;
     b.finish()
 }
 
@@ -321,18 +252,16 @@ fn bulk_read_like(
     entries: impl IntoIterator<Item = BulkReadEntry>,
 ) -> Result<usize, EncodeError> {
     let mut b = Builder::new(buf, BROADCAST_ID, inst as u8, true)?;
-    let mut seen = IdSet::default();
-    let mut any = false;
-    for e in entries {
-        seen.insert(device_id(e.id)?)?;
-        b.byte(e.id)?;
-        b.u16(e.addr)?;
-        b.u16(e.len)?;
-        any = true;
-    }
-    if !any {
-        return Err(EncodeError::NoEntries);
-    }
+    common::entries(
+        entries,
+        MAX_DEVICE_ID,
+        |e| e.id,
+        |e| {
+            b.byte(e.id)?;
+            b.u16(e.addr)?;
+            b.u16(e.len)
+        },
+    )?;
     b.finish()
 }
 
@@ -358,20 +287,18 @@ pub fn bulk_write<'d>(
     entries: impl IntoIterator<Item = BulkWriteEntry<'d>>,
 ) -> Result<usize, EncodeError> {
     let mut b = Builder::new(buf, BROADCAST_ID, Instruction::BulkWrite as u8, true)?;
-    let mut seen = IdSet::default();
-    let mut any = false;
-    for e in entries {
-        seen.insert(device_id(e.id)?)?;
-        let len = u16::try_from(e.data.len()).map_err(|_| EncodeError::TooLong)?;
-        b.byte(e.id)?;
-        b.u16(e.addr)?;
-        b.u16(len)?;
-        b.bytes(e.data)?;
-        any = true;
-    }
-    if !any {
-        return Err(EncodeError::NoEntries);
-    }
+    common::entries(
+        entries,
+        MAX_DEVICE_ID,
+        |e| e.id,
+        |e| {
+            let len = u16::try_from(e.data.len()).map_err(|_| EncodeError::TooLong)?;
+            b.byte(e.id)?;
+            b.u16(e.addr)?;
+            b.u16(len)?;
+            b.bytes(e.data)
+        },
+    )?;
     b.finish()
 }
 

@@ -24,11 +24,11 @@ mod request;
 mod scanner;
 pub mod stuffing;
 
+pub use crate::dynamixel_common::EncodeError;
 pub use encode::{
     action, bulk_read, bulk_write, clear_multi_turn, control_table_backup, factory_reset,
     fast_bulk_read, fast_status, fast_sync_read, ping, read, reboot, reg_write, status, sync_read,
-    sync_write, write, BackupOp, BulkReadEntry, BulkWriteEntry, EncodeError, FactoryResetMode,
-    FastStatusSlice,
+    sync_write, write, BackupOp, BulkReadEntry, BulkWriteEntry, FactoryResetMode, FastStatusSlice,
 };
 pub use fast::{FastReply, FastReplyError, FastSlice, FastSlices};
 pub use packet::{
@@ -36,12 +36,12 @@ pub use packet::{
     StatusError,
 };
 pub use request::{BulkWriteEntries, Request, RequestError};
-pub use scanner::Scanner;
+pub use scanner::{Dxl2Framing, Scanner};
 
 /// The four bytes every packet starts with (`FF FF FD` plus the reserved `00`).
 pub const HEADER: [u8; 4] = [0xFF, 0xFF, 0xFD, 0x00];
 /// The broadcast ID.
-pub const BROADCAST_ID: u8 = 0xFE;
+pub const BROADCAST_ID: u8 = crate::dynamixel_common::BROADCAST_ID;
 /// The largest ID a device can have.
 pub const MAX_DEVICE_ID: u8 = 0xFC;
 /// Bytes of a packet that are not parameters: header(4), ID, LEN(2), INST, CRC(2).

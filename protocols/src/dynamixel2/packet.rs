@@ -2,6 +2,7 @@
 
 use super::stuffing::unstuff_in_place;
 use super::{crc, Instruction, BROADCAST_ID, HEADER, MAX_DEVICE_ID};
+use crate::dynamixel_common::addressable;
 
 /// A CRC-checked packet with stuffing removed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -60,7 +61,7 @@ pub enum ParseError {
 }
 
 pub(crate) fn id_is_valid(id: u8) -> bool {
-    id <= MAX_DEVICE_ID || id == BROADCAST_ID
+    addressable(id, MAX_DEVICE_ID)
 }
 
 /// Checks the packet at the start of `buf` (header, ID, length, CRC) without modifying it and

@@ -2,13 +2,19 @@
 
 use super::packet::{decode_checked, id_is_valid, Packet};
 use super::{crc, HEADER};
-use crate::scan::{Engine, Framing, ScanStats};
+use crate::scan::{Framing, PacketScanner};
 
-struct Dxl2;
+/// The Protocol 2.0 framing: header `FF FF FD 00`, ID, two-byte length, CRC-16; the scanner
+/// removes the byte stuffing of the packets it yields.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Dxl2Framing;
 
-impl Framing for Dxl2 {
+impl Framing for Dxl2Framing {
+    type Packet<'a> = Packet<'a>;
     const HEADER: &'static [u8] = &HEADER;
     const FIELDS_LEN: usize = 7;
+    const MIN_PACKET: usize = 10;
+    const MAX_PACKET: usize = usize::MAX;
 
     fn total_len(f: &[u8]) -> Option<usize> {
         let len = u16::from_le_bytes([f[5], f[6]]);
@@ -19,15 +25,17 @@ impl Framing for Dxl2 {
         let n = p.len();
         crc::crc16(&p[..n - 2]) == u16::from_le_bytes([p[n - 2], p[n - 1]])
     }
+
+    fn decode(frame: &mut [u8]) -> Packet<'_> {
+        decode_checked(frame)
+    }
 }
 
-/// Fixed-capacity Dynamixel 2.0 stream scanner with discard counters.
+/// Fixed-capacity Dynamixel 2.0 stream scanner with discard counters ([`PacketScanner`]).
 ///
 /// `N` is the buffer capacity; the largest packet it yields is `N - 3` bytes (or the smaller
-/// maximum given to [`Scanner::with_max_packet`]): a longer candidate counts as `oversize`.
-/// It yields status and instruction packets alike (a simulator scans instructions); ID and
-/// instruction filtering is the caller's business. See [`crate::scan`] for the discard causes
-/// and the accounting invariant.
+/// maximum given to `with_max_packet`): a longer candidate counts as `oversize`. Packets come
+/// with their stuffing removed.
 ///
 /// ```
 /// use conductor_protocols::dynamixel2::{Scanner, Status};
@@ -38,89 +46,4 @@ impl Framing for Dxl2 {
 /// assert_eq!(ids, [1]);
 /// assert_eq!(s.stats().garbage.bytes, 1);
 /// ```
-pub struct Scanner<const N: usize = 1024> {
-    engine: Engine<N>,
-}
-
-impl<const N: usize> Default for Scanner<N> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl<const N: usize> Scanner<N> {
-    const MIN_CAPACITY: () = assert!(N >= 16, "scanner capacity must be at least 16 bytes");
-
-    /// A scanner accepting packets up to `N - 3` bytes.
-    pub fn new() -> Self {
-        Self::with_max_packet(N)
-    }
-
-    /// A scanner accepting packets up to `max_packet` wire bytes (clamped to `N - 3`). A tight
-    /// maximum (the longest reply the caller expects) makes a corrupted length field cost less.
-    pub fn with_max_packet(max_packet: usize) -> Self {
-        #[allow(clippy::let_unit_value)]
-        let () = Self::MIN_CAPACITY;
-        Self {
-            engine: Engine::new(max_packet.max(10), HEADER.len()),
-        }
-    }
-
-    /// Largest packet (wire bytes) this scanner yields.
-    pub fn max_packet(&self) -> usize {
-        self.engine.max_packet()
-    }
-
-    /// Copies as many bytes as fit into the buffer; returns how many were taken. After
-    /// [`next_packet`](Self::next_packet) has returned `None` at least one byte always fits.
-    pub fn push(&mut self, bytes: &[u8]) -> usize {
-        self.engine.push(bytes)
-    }
-
-    /// The next complete packet whose CRC checked, stuffing removed. It borrows the scanner's
-    /// buffer and is consumed by the next call.
-    pub fn next_packet(&mut self) -> Option<Packet<'_>> {
-        let range = self.engine.next_frame::<Dxl2>()?;
-        Some(decode_checked(&mut self.engine.buf_mut()[range]))
-    }
-
-    /// Declares that no more bytes are coming for what is buffered (reply timeout): incomplete
-    /// candidates become `truncated` on the following [`next_packet`](Self::next_packet) calls,
-    /// and any complete packets behind them are still yielded. The next `push` ends this.
-    pub fn expire(&mut self) {
-        self.engine.expire();
-    }
-
-    /// Pushes all of `bytes`, calling `on_packet` for every packet completed.
-    pub fn feed(&mut self, mut bytes: &[u8], mut on_packet: impl FnMut(Packet<'_>)) {
-        loop {
-            let n = self.push(bytes);
-            bytes = &bytes[n..];
-            while let Some(p) = self.next_packet() {
-                on_packet(p);
-            }
-            if bytes.is_empty() {
-                return;
-            }
-        }
-    }
-
-    /// [`expire`](Self::expire), then drains: calls `on_packet` for packets still complete
-    /// behind truncated ones. The buffer is empty afterwards.
-    pub fn expire_with(&mut self, mut on_packet: impl FnMut(Packet<'_>)) {
-        self.expire();
-        while let Some(p) = self.next_packet() {
-            on_packet(p);
-        }
-    }
-
-    /// Discard counters since creation.
-    pub fn stats(&self) -> &ScanStats {
-        self.engine.stats()
-    }
-
-    /// Bytes accepted but not yet yielded or discarded.
-    pub fn buffered(&self) -> usize {
-        self.engine.buffered()
-    }
-}
+pub type Scanner<const N: usize = 1024> = PacketScanner<Dxl2Framing, N>;

@@ -6,7 +6,7 @@
 
 use super::response::{parse, Parsed};
 use super::{Command, Dialect, Response, SlcanError, BEL, CR};
-use crate::scan::Tally;
+use crate::scan::{self, Scan, Tally, Window};
 
 /// One line: its body and the terminator that ended it (CR or BEL).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -48,13 +48,9 @@ impl LineStats {
 
 /// Splits a byte stream into CR- or BEL-terminated lines of at most `N - 1` body bytes.
 pub struct LineScanner<const N: usize = 64> {
-    buf: [u8; N],
-    start: usize,
-    end: usize,
-    pending: usize,
+    win: Window<N>,
     /// Inside an overlong line: drop bytes up to the next terminator.
     skipping: bool,
-    flush: bool,
     stats: LineStats,
 }
 
@@ -76,38 +72,16 @@ impl<const N: usize> LineScanner<N> {
         #[allow(clippy::let_unit_value)]
         let () = Self::MIN_CAPACITY;
         Self {
-            buf: [0; N],
-            start: 0,
-            end: 0,
-            pending: 0,
+            win: Window::new(),
             skipping: false,
-            flush: false,
             stats: LineStats::default(),
-        }
-    }
-
-    fn consume_pending(&mut self) {
-        self.start += self.pending;
-        self.pending = 0;
-        if self.start == self.end {
-            self.start = 0;
-            self.end = 0;
         }
     }
 
     /// Copies as many bytes as fit; returns how many were taken. After
     /// [`next_line`](Self::next_line) has returned `None` at least one byte always fits.
     pub fn push(&mut self, data: &[u8]) -> usize {
-        self.consume_pending();
-        self.flush = false;
-        if self.start > 0 && self.end + data.len() > N {
-            self.buf.copy_within(self.start..self.end, 0);
-            self.end -= self.start;
-            self.start = 0;
-        }
-        let n = data.len().min(N - self.end);
-        self.buf[self.end..self.end + n].copy_from_slice(&data[..n]);
-        self.end += n;
+        let n = self.win.push(data);
         self.stats.bytes_in += n as u64;
         n
     }
@@ -115,28 +89,20 @@ impl<const N: usize> LineScanner<N> {
     /// No more bytes are coming for the buffered partial line: it is discarded as truncated
     /// by the next [`next_line`](Self::next_line). The next `push` ends this.
     pub fn expire(&mut self) {
-        self.flush = true;
-    }
-
-    fn drop_bytes(&mut self, n: usize) {
-        self.start += n;
-        if self.start == self.end {
-            self.start = 0;
-            self.end = 0;
-        }
+        self.win.expire();
     }
 
     /// The next complete line as (body range, terminator); the line is consumed by the next
     /// call.
     pub(crate) fn next_range(&mut self) -> Option<(core::ops::Range<usize>, u8)> {
-        self.consume_pending();
+        self.win.consume_pending();
         loop {
-            let data = &self.buf[self.start..self.end];
+            let data = self.win.data();
             let term = data.iter().position(|&b| is_terminator(b));
             if self.skipping {
                 let n = term.map_or(data.len(), |i| i + 1);
                 self.stats.overlong.bytes += n as u64;
-                self.drop_bytes(n);
+                self.win.drop_front(n);
                 term?;
                 self.skipping = false;
                 continue;
@@ -146,17 +112,17 @@ impl<const N: usize> LineScanner<N> {
                     let t = data[i];
                     self.stats.lines += 1;
                     self.stats.line_bytes += i as u64 + 1;
-                    self.pending = i + 1;
-                    return Some((self.start..self.start + i, t));
+                    let line = self.win.yield_front(i + 1);
+                    return Some((line.start..line.end - 1, t));
                 }
                 None if data.len() >= N => {
                     self.stats.overlong.events += 1;
                     self.skipping = true;
                 }
-                None if self.flush && !data.is_empty() => {
+                None if self.win.flushing() && !data.is_empty() => {
                     self.stats.truncated.add(data.len(), true);
                     let n = data.len();
-                    self.drop_bytes(n);
+                    self.win.drop_front(n);
                     return None;
                 }
                 None => return None,
@@ -168,7 +134,7 @@ impl<const N: usize> LineScanner<N> {
     pub fn next_line(&mut self) -> Option<Line<'_>> {
         let (r, terminator) = self.next_range()?;
         Some(Line {
-            body: &self.buf[r],
+            body: &self.win.buf()[r],
             terminator,
         })
     }
@@ -180,7 +146,7 @@ impl<const N: usize> LineScanner<N> {
 
     /// Bytes accepted but not yet delivered or discarded.
     pub fn buffered(&self) -> usize {
-        self.end - self.start - self.pending
+        self.win.buffered()
     }
 
     /// Moves a delivered line into a discard cause (used by the parsing scanners).
@@ -240,7 +206,7 @@ impl<const N: usize> HostScanner<N> {
         let (range, parsed) = loop {
             let (r, term) = self.lines.next_range()?;
             let line = super::Line {
-                body: &self.lines.buf[r.clone()],
+                body: &self.lines.win.buf()[r.clone()],
                 terminator: term,
             };
             match parse(line) {
@@ -257,21 +223,12 @@ impl<const N: usize> HostScanner<N> {
                     .reclassify(r.len() + 1, !matches!(e, SlcanError::Unknown(_))),
             }
         };
-        Some(parsed.resolve(&self.lines.buf[range]))
+        Some(parsed.resolve(&self.lines.win.buf()[range]))
     }
 
     /// Pushes all of `bytes`, calling `on_response` for each response.
-    pub fn feed(&mut self, mut bytes: &[u8], mut on_response: impl FnMut(Response<'_>)) {
-        loop {
-            let n = self.push(bytes);
-            bytes = &bytes[n..];
-            while let Some(r) = self.next_response() {
-                on_response(r);
-            }
-            if bytes.is_empty() {
-                return;
-            }
-        }
+    pub fn feed(&mut self, bytes: &[u8], on_response: impl FnMut(Response<'_>)) {
+        scan::feed(self, bytes, on_response);
     }
 
     /// Counters since creation.
@@ -314,7 +271,7 @@ impl<const N: usize> DeviceScanner<N> {
     /// The next command line, decoded.
     pub fn next_command(&mut self) -> Option<Result<Command, SlcanError>> {
         let (r, term) = self.lines.next_range()?;
-        let body = &self.lines.buf[r.clone()];
+        let body = &self.lines.win.buf()[r.clone()];
         let result = if term == BEL {
             Err(SlcanError::Bel)
         } else {
@@ -328,21 +285,8 @@ impl<const N: usize> DeviceScanner<N> {
     }
 
     /// Pushes all of `bytes`, calling `on_command` for each line.
-    pub fn feed(
-        &mut self,
-        mut bytes: &[u8],
-        mut on_command: impl FnMut(Result<Command, SlcanError>),
-    ) {
-        loop {
-            let n = self.push(bytes);
-            bytes = &bytes[n..];
-            while let Some(c) = self.next_command() {
-                on_command(c);
-            }
-            if bytes.is_empty() {
-                return;
-            }
-        }
+    pub fn feed(&mut self, bytes: &[u8], on_command: impl FnMut(Result<Command, SlcanError>)) {
+        scan::feed(self, bytes, on_command);
     }
 
     /// Counters since creation.
@@ -353,5 +297,37 @@ impl<const N: usize> DeviceScanner<N> {
     /// Bytes accepted but not yet delivered or discarded.
     pub fn buffered(&self) -> usize {
         self.lines.buffered()
+    }
+}
+
+impl<const N: usize> Scan for HostScanner<N> {
+    type Item<'a> = Response<'a>;
+
+    fn push(&mut self, bytes: &[u8]) -> usize {
+        HostScanner::push(self, bytes)
+    }
+
+    fn next_item(&mut self) -> Option<Response<'_>> {
+        self.next_response()
+    }
+
+    fn expire(&mut self) {
+        HostScanner::expire(self);
+    }
+}
+
+impl<const N: usize> Scan for DeviceScanner<N> {
+    type Item<'a> = Result<Command, SlcanError>;
+
+    fn push(&mut self, bytes: &[u8]) -> usize {
+        DeviceScanner::push(self, bytes)
+    }
+
+    fn next_item(&mut self) -> Option<Result<Command, SlcanError>> {
+        self.next_command()
+    }
+
+    fn expire(&mut self) {
+        DeviceScanner::expire(self);
     }
 }

@@ -1,0 +1,192 @@
+//! The protocol stage shared by the register-mapped UART protocols (Dynamixel 2.0 and 1.0):
+//! each tick it queues the requests in the [`Core`], sends the queued writes as one SYNC WRITE
+//! per register and the queued reads as one read transaction, and hands every status packet the
+//! scanner finds back to the core. A [`Dialect`] supplies what differs: the packet encoders,
+//! the read instruction, the packet framing and how a status packet reads.
+
+use conductor_protocols::scan::{Framing, PacketScanner, ScanStats};
+
+use super::register::{Core, Entry, ReadShape, Timing};
+use crate::message::{Reply, Request};
+use crate::queue::Bounded;
+use crate::stage::{ProtocolCounters, TickCtx};
+
+/// A read transaction as encoded: what it puts on the wire and what it expects back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct ReadTxn {
+    /// Instruction bytes.
+    pub bytes: usize,
+    /// Answered by one combined (fast) reply.
+    pub fast: bool,
+    /// Reply bytes expected (before stuffing).
+    pub reply_bytes: usize,
+    /// Status packets expected.
+    pub replies: usize,
+}
+
+/// What one register-bus protocol adds to the shared stage.
+pub(crate) trait Dialect {
+    /// The packets the stage scans for.
+    type Framing: Framing;
+
+    /// Reads go one device per transaction (round robin) instead of all at once.
+    fn single(&self) -> bool;
+
+    /// Encodes a SYNC WRITE of `len` bytes at `addr` into `buf`, one `(id, little-endian
+    /// value)` per device; `None` if the protocol cannot carry it.
+    fn sync_write(
+        &mut self,
+        buf: &mut [u8],
+        addr: u16,
+        len: u8,
+        values: &[(u8, [u8; 4])],
+    ) -> Option<usize>;
+
+    /// Encodes the read instruction for `entries` (all of one `shape`) into `buf`; `None` if
+    /// the protocol cannot carry it.
+    fn read(&mut self, buf: &mut [u8], entries: &[Entry], shape: ReadShape) -> Option<ReadTxn>;
+
+    /// Hands a packet the scanner found to `core` (status packets) or counts it.
+    fn on_packet(
+        &mut self,
+        core: &mut Core,
+        packet: <Self::Framing as Framing>::Packet<'_>,
+        out: &mut Bounded<Reply>,
+    );
+}
+
+/// A register-bus protocol stage over dialect `D`, scanning with an `N`-byte buffer.
+pub(crate) struct Stage<D: Dialect, const N: usize> {
+    core: Core,
+    dialect: D,
+    scanner: Box<PacketScanner<D::Framing, N>>,
+    pkt: Vec<u8>,
+    group: Vec<(u8, i64)>,
+    values: Vec<(u8, [u8; 4])>,
+    entries: Vec<Entry>,
+}
+
+impl<D: Dialect, const N: usize> Stage<D, N> {
+    /// Room for `devices` devices (IDs up to `max_id`), `in_flight` read requests and packets
+    /// of `max_packet` bytes.
+    pub fn new(
+        dialect: D,
+        timing: Timing,
+        max_id: u8,
+        devices: usize,
+        in_flight: usize,
+        max_packet: usize,
+    ) -> Self {
+        Self {
+            core: Core::new(timing, max_id, devices, in_flight),
+            dialect,
+            scanner: Box::new(PacketScanner::new()),
+            pkt: vec![0; max_packet],
+            group: Vec::with_capacity(devices),
+            values: Vec::with_capacity(devices),
+            entries: Vec::with_capacity(devices),
+        }
+    }
+
+    pub fn dialect(&self) -> &D {
+        &self.dialect
+    }
+
+    /// The scanner's discard counters.
+    pub fn scan_stats(&self) -> &ScanStats {
+        self.scanner.stats()
+    }
+
+    /// Valid status packets nobody was waiting for.
+    pub fn unsolicited(&self) -> u64 {
+        self.core.unsolicited
+    }
+
+    /// Appends the first `n` bytes of the packet buffer to `out` if they fit.
+    fn emit(&mut self, n: usize, out: &mut Bounded<u8>) -> bool {
+        if out.remaining() < n {
+            return false;
+        }
+        out.extend_from_slice(&self.pkt[..n]);
+        self.core.counters.packets_out += 1;
+        self.core.counters.words_out += n as u64;
+        true
+    }
+
+    pub fn encode(&mut self, requests: &[Request], out: &mut Bounded<u8>, ctx: TickCtx) {
+        self.core.absorb(requests);
+        if !self.core.has_work() || !self.core.bus_free(ctx.now_ns) {
+            return;
+        }
+        self.send_writes(out, ctx.now_ns);
+        self.send_reads(out, ctx.now_ns);
+    }
+
+    fn send_writes(&mut self, out: &mut Bounded<u8>, now_ns: u64) {
+        while let Some((addr, len)) = self.core.take_write_group(&mut self.group) {
+            self.values.clear();
+            for &(id, v) in &self.group {
+                self.values.push((id, (v as u32).to_le_bytes()));
+            }
+            match self
+                .dialect
+                .sync_write(&mut self.pkt, addr, len, &self.values)
+            {
+                Some(n) if self.emit(n, out) => self.core.occupy(now_ns, n),
+                _ => self.core.drop_writes(self.group.len()),
+            }
+        }
+    }
+
+    fn send_reads(&mut self, out: &mut Bounded<u8>, now_ns: u64) {
+        let single = self.dialect.single();
+        let Some(shape) = self.core.plan_reads(single, &mut self.entries) else {
+            return;
+        };
+        let txn = self.dialect.read(&mut self.pkt, &self.entries, shape);
+        let entries = std::mem::take(&mut self.entries);
+        match txn {
+            Some(t) if self.emit(t.bytes, out) => {
+                self.core
+                    .start_txn(&entries, t.fast, now_ns, t.bytes, t.reply_bytes, t.replies);
+            }
+            _ => self.core.abandon_reads(&entries),
+        }
+        self.entries = entries;
+    }
+
+    pub fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>) {
+        self.core.counters.words_in += words.len() as u64;
+        let Self {
+            core,
+            dialect,
+            scanner,
+            ..
+        } = self;
+        scanner.feed(words, |p| dialect.on_packet(core, p, out));
+    }
+
+    pub fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
+        let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
+        if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
+            // The line is quiet for the oldest transaction: a partial packet will never
+            // complete. Packets complete behind it still count.
+            let Self {
+                core,
+                dialect,
+                scanner,
+                ..
+            } = self;
+            scanner.expire_with(|p| dialect.on_packet(core, p, out));
+        }
+        self.core.expire(ctx.now_ns, out);
+    }
+
+    pub fn counters(&self) -> ProtocolCounters {
+        let s = self.scanner.stats();
+        let mut c = self.core.counters;
+        c.discarded_words = s.discarded_bytes();
+        c.rejected_packets += s.rejected_packets() + self.core.unsolicited;
+        c
+    }
+}

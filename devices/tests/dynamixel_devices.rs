@@ -1,0 +1,154 @@
+//! The Dynamixel device stages on their own: what they request, how they read replies (units,
+//! range checks, faults), how the X series' operating mode re-ranges the goal position, and
+//! their safe actions.
+
+use std::f64::consts::PI;
+
+use conductor_devices::device::{
+    dxl1_channel, x_channel, Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX,
+};
+use conductor_devices::{
+    Bounded, Credential, Device, Op, Reply, ReplyData, Request, SafeAction, TickCtx, Update,
+};
+
+const CTX: TickCtx = TickCtx {
+    tick: 7,
+    now_ns: 1_000,
+};
+
+fn ops(f: impl FnOnce(&mut Bounded<Request>)) -> Vec<Op> {
+    let mut out = Bounded::with_capacity(16);
+    f(&mut out);
+    assert!(out.as_slice().iter().all(|r| r.cred == Credential::id(1)
+        && r.tick == CTX.tick
+        && r.t_request_ns == CTX.now_ns));
+    out.as_slice().iter().map(|r| r.op).collect()
+}
+
+fn register(addr: u16, len: u8, value: i64) -> Reply {
+    Reply {
+        cred: Credential::id(1),
+        data: ReplyData::Register { addr, len, value },
+        tick: CTX.tick,
+        t_sample_ns: 500,
+    }
+}
+
+fn updates(d: &mut impl Device, r: &Reply) -> Vec<Update> {
+    let mut out = Bounded::with_capacity(8);
+    d.reply(r, &mut out);
+    out.as_slice().to_vec()
+}
+
+fn write(addr: u16, len: u8, value: i64) -> Op {
+    Op::Write { addr, len, value }
+}
+
+#[test]
+fn x_series_operating_mode_decides_the_goal_range() {
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    // 10 rad = 6519 steps of 2π/4096 from the zero at 2048.
+    assert_eq!(d.position_raw(10.0), 4095, "position mode: one turn");
+    d.write(x_channel::OPERATING_MODE, 4.0, CTX);
+    assert_eq!(d.position_raw(10.0), 2048 + 6519, "extended position mode");
+    assert_eq!(ops(|o| d.flush(CTX, o)), [write(11, 1, 4)]);
+    // The servo reports position mode again: the range follows what it reads.
+    let u = updates(&mut d, &register(11, 1, 3));
+    assert_eq!(u.len(), 1);
+    assert_eq!(
+        (u[0].channel, u[0].value),
+        (x_channel::OPERATING_MODE, Some(3.0))
+    );
+    assert_eq!(d.position_raw(10.0), 4095);
+    d.write(x_channel::GOAL_POSITION, 10.0, CTX);
+    assert_eq!(ops(|o| d.flush(CTX, o)), [write(116, 4, 4095)]);
+}
+
+#[test]
+fn x_series_reads_in_units_rejects_the_impossible_and_holds_the_last_position() {
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    assert_eq!(
+        ops(|o| d.safe(SafeAction::Hold, CTX, o)),
+        [write(64, 1, 0)],
+        "nothing to hold yet: torque off"
+    );
+    assert_eq!(
+        ops(|o| d.sample(x_channel::POSITION, CTX, o)),
+        [Op::Read { addr: 132, len: 4 }]
+    );
+    let u = updates(&mut d, &register(132, 4, 3072));
+    assert_eq!(u.len(), 1);
+    assert_eq!(
+        (u[0].channel, u[0].fault, u[0].tick, u[0].t_sample_ns),
+        (x_channel::POSITION, false, CTX.tick, 500)
+    );
+    // A quarter turn; the conversion is one multiplication, exact to an ulp or two.
+    assert!((u[0].value.unwrap() - PI / 2.0).abs() < 1e-12);
+    assert!((d.last(x_channel::POSITION).unwrap() - PI / 2.0).abs() < 1e-12);
+    // -2 000 000 steps (two's complement, zero-extended) is past the 256-turn range: stale.
+    let u = updates(&mut d, &register(132, 4, 0xFFE1_7B80));
+    assert_eq!((u.len(), u[0].value), (1, None));
+    assert_eq!(d.range_rejects(), 1);
+    assert_eq!(
+        ops(|o| d.safe(SafeAction::Hold, CTX, o)),
+        [write(116, 4, 3072)],
+        "hold writes the last good position as the goal"
+    );
+    // A device error marks the tick's values as faulty; a missing read makes them stale.
+    updates(
+        &mut d,
+        &Reply {
+            data: ReplyData::DeviceError { code: 0x80 },
+            ..register(0, 0, 0)
+        },
+    );
+    let u = updates(&mut d, &register(146, 1, 40));
+    assert_eq!(
+        (u[0].channel, u[0].value, u[0].fault),
+        (x_channel::TEMPERATURE, Some(40.0), true)
+    );
+    let missing = Reply {
+        data: ReplyData::Missing {
+            op: Op::Read { addr: 128, len: 4 },
+        },
+        ..register(0, 0, 0)
+    };
+    let u = updates(&mut d, &missing);
+    assert_eq!((u[0].channel, u[0].value), (x_channel::VELOCITY, None));
+}
+
+#[test]
+fn protocol_1_servo_speaks_sign_magnitude_and_its_own_addresses() {
+    let mut d = Dynamixel1::new(Credential::id(1), Dxl1Model::Ax, 512);
+    let speed = 0.111 * 2.0 * PI / 60.0;
+    assert_eq!(
+        ops(|o| d.sample(dxl1_channel::VELOCITY, CTX, o)),
+        [Op::Read { addr: 38, len: 2 }]
+    );
+    // Bit 10 set: 100 steps the other way.
+    let u = updates(&mut d, &register(38, 2, 0x400 | 100));
+    assert!((u[0].value.unwrap() + 100.0 * speed).abs() < 1e-12);
+    // Moving Speed 0 means "full speed": the smallest speed written is 1 step.
+    d.write(dxl1_channel::VELOCITY, 0.0, CTX);
+    d.write(dxl1_channel::POSITION, 0.0, CTX);
+    assert_eq!(
+        ops(|o| d.flush(CTX, o)),
+        [write(30, 2, 512), write(32, 2, 1)]
+    );
+    assert_eq!(
+        ops(|o| d.safe(
+            SafeAction::Setpoint {
+                channel: dxl1_channel::TORQUE_ENABLE,
+                value: 0.0
+            },
+            CTX,
+            o
+        )),
+        [write(24, 1, 0)]
+    );
+    // AX positions run 0..=1023 (300°): 1024 is damaged.
+    let u = updates(&mut d, &register(36, 2, 1024));
+    assert_eq!((u[0].channel, u[0].value), (dxl1_channel::POSITION, None));
+    assert_eq!(d.range_rejects(), 1);
+    assert_eq!(ops(|o| d.safe(SafeAction::Hold, CTX, o)), [write(24, 1, 0)]);
+}
