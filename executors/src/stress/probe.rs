@@ -56,9 +56,10 @@ impl ProbeReport {
     /// One line of `key=value` pairs, starting with `probe=<state>`.
     pub fn line(&self) -> String {
         format!(
-            "probe={} sent={} written={} unresolved={} early={} {} {}",
+            "probe={} sent={} reflected={} written={} unresolved={} early={} {} {}",
             self.name,
             self.sent,
+            self.to_reflect.count(),
             self.written,
             self.unresolved,
             self.early,

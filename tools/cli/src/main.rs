@@ -7,10 +7,12 @@ use conductor_cli::cli::{Cli, Command};
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    // These two take over signal handling and must run before any other thread starts.
+    // These take over signal handling and must run before any other thread starts.
     match &cli.command {
         Command::Launch(a) => return conductor_cli::launch::run(cli.domain.as_deref(), a),
         Command::Executor { args } => return conductor_cli::launch::executor(args),
+        Command::Stress { args } => return conductor_cli::bench::stress_tool(args),
+        Command::PingPong => return conductor_cli::bench::pingpong_child(),
         _ => {}
     }
     match conductor_cli::run(cli) {
