@@ -102,7 +102,10 @@ fn quick_bench_writes_a_table_json_and_plots() {
             &row["sample_to_subscriber"],
             &format!("{what} sample→subscriber"),
         );
-        quantiles_ok(&row["command"]["to_write"], &format!("{what} command→write"));
+        quantiles_ok(
+            &row["command"]["to_write"],
+            &format!("{what} command→write"),
+        );
         for k in ["ticks", "misses", "samples", "lost", "late_steps"] {
             assert!(row[k].is_u64(), "{what}: {k} = {}", row[k]);
         }
@@ -139,11 +142,7 @@ fn quick_bench_writes_a_table_json_and_plots() {
     expected.insert("error-all-rates.png".into());
     assert_eq!(listed, expected);
     for p in &listed {
-        assert_eq!(
-            png_size(&out.join(p)),
-            (plots::WIDTH, plots::HEIGHT),
-            "{p}"
-        );
+        assert_eq!(png_size(&out.join(p)), (plots::WIDTH, plots::HEIGHT), "{p}");
     }
 
     // Markdown: the three per-run tables, each with a row per rate and state count.
@@ -157,7 +156,10 @@ fn quick_bench_writes_a_table_json_and_plots() {
     for t in &tables {
         assert_eq!(t, &want, "{md}");
     }
-    assert!(md.contains("| raw-busy |") && md.contains("| raw-event |"), "{md}");
+    assert!(
+        md.contains("| raw-busy |") && md.contains("| raw-event |"),
+        "{md}"
+    );
     // The Markdown is also what the command prints.
     assert_eq!(String::from_utf8_lossy(&run.stdout).trim(), md.trim());
     let _ = std::fs::remove_dir_all(&out);
