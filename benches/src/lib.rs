@@ -1,9 +1,16 @@
-//! Shared helpers for the Conductor + Score benchmarks.
+//! Shared code of the Conductor + Score benchmarks, and `conductor bench`'s suite.
 //!
-//! Criterion measures means and confidence intervals; real-time work needs the tail. Every
-//! latency benchmark therefore records raw per-sample figures and summarises them with
-//! [`Percentiles`], which never filters outliers (the tail is the point).
+//! * [`percentiles`] — order statistics over raw samples. Criterion measures means and
+//!   confidence intervals; real-time work needs the tail, so every latency benchmark records raw
+//!   per-sample figures and summarises them with [`Percentiles`], which never filters outliers
+//!   (the tail is the point).
+//! * [`pingpong`] — one-way latency between two processes over raw iceoryx2 (the IPC floor) and
+//!   over the Conductor bus; used by the `bus_latency` criterion bench and by the suite.
+//! * [`suite`] — the thesis' stress test at 50 Hz – 10 kHz beside cyclictest and the IPC floor,
+//!   with a Markdown/JSON report and plots (`conductor bench`).
 
 pub mod percentiles;
+pub mod pingpong;
+pub mod suite;
 
 pub use percentiles::Percentiles;

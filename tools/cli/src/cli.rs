@@ -17,6 +17,7 @@ Examples:
   conductor replay run.mcap --domain replay       publish a recording as live states
   conductor udp-gateway --base-port 2827          plain-text SET/GET/SMP per state (thesis §2.5.2)
   conductor plot run.mcap 'leg/*' -o leg.png      joint plot of recorded states
+  conductor bench --quick                         stress test beside cyclictest, ~1 minute
   conductor completions bash > /etc/bash_completion.d/conductor
 
 The domain comes from --domain, else $CONDUCTOR_DOMAIN, else \"default\".
@@ -118,6 +119,29 @@ Examples:\n  conductor udp-gateway\n  conductor udp-gateway 'leg/*' --base-port 
         after_help = "Example:\n  conductor plot run.mcap 'leg/*' -o leg.png --title 'Robot Joint State'"
     )]
     Plot(PlotArgs),
+    /// Benchmark suite: the thesis' stress test at 50 Hz–10 kHz beside cyclictest and the IPC
+    /// floor; writes a Markdown table, JSON and plots.
+    #[command(
+        after_help = "For every rate and number of states: tick lateness p50/p99/p99.9/max
+beside cyclictest's at the same rate, priority and CPU (with ratios), misses, executor CPU use,
+hardware sample -> external subscriber and controller command -> hardware write latencies, the
+thesis' error sin(t) - value (Fig. 3.1 plots); plus the raw iceoryx2 ping-pong floor. Installs
+rt-tests (cyclictest) with apt-get when it is missing, unless --no-install. A full run takes
+about 6 minutes; --quick about one. Run it on a quiet machine.
+
+Examples:\n  conductor bench\n  conductor bench --quick -o /tmp/bench\n  conductor bench --rates 1000,2000,5000 --states 3 --seconds 5"
+    )]
+    Bench(BenchArgs),
+    /// The stress test's helper processes (logger, probe; see `conductor-stress --help`).
+    #[command(name = "__stress", hide = true, disable_help_flag = true)]
+    Stress {
+        /// The tool's own arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
+    /// The receiving side of the IPC ping-pong (its role comes from the environment).
+    #[command(name = "__pingpong", hide = true)]
+    PingPong,
     /// Print a shell completion script.
     #[command(after_help = "Example:\n  conductor completions zsh > ~/.zfunc/_conductor")]
     Completions {
@@ -290,6 +314,44 @@ pub struct PlotArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 700)]
     pub height: u32,
+}
+
+/// `conductor bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// About one minute: fewer rates (100 Hz, 1 kHz), 3 s per run, fewer ping-pongs.
+    #[arg(long)]
+    pub quick: bool,
+    /// Output directory (report.md, report.json, *.png).
+    #[arg(short, long, default_value = "bench-out", value_name = "DIR")]
+    pub out: PathBuf,
+    /// Rates in Hz [default: 50,100,500,1000,5000,10000; --quick: 100,1000].
+    #[arg(long, value_delimiter = ',', value_name = "HZ,...")]
+    pub rates: Vec<f64>,
+    /// Numbers of sine states [default: 3,41].
+    #[arg(long, value_delimiter = ',', value_name = "N,...")]
+    pub states: Vec<usize>,
+    /// Logged seconds per run [default: 15, the span of Fig. 3.1; --quick: 3].
+    #[arg(long, value_name = "S")]
+    pub seconds: Option<f64>,
+    /// CPU of the executor and cyclictest [default: the last one].
+    #[arg(long, value_name = "N")]
+    pub cpu: Option<usize>,
+    /// SCHED_FIFO priority of the executor and cyclictest.
+    #[arg(long, default_value_t = 80, value_name = "P")]
+    pub priority: i32,
+    /// Round trips per IPC ping-pong path [default: 50000; --quick: 5000].
+    #[arg(long, value_name = "N")]
+    pub ipc_samples: Option<usize>,
+    /// Do not run cyclictest.
+    #[arg(long)]
+    pub no_cyclictest: bool,
+    /// Do not install rt-tests when cyclictest is missing.
+    #[arg(long)]
+    pub no_install: bool,
+    /// Never draw a progress bar (it is drawn only when stderr is a terminal anyway).
+    #[arg(long)]
+    pub no_progress: bool,
 }
 
 /// `conductor launch`.

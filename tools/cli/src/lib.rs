@@ -5,12 +5,14 @@
 //!
 //! * inspection: [`list`], [`get_set`] (`get`, `set`), [`echo`], [`top`];
 //! * logging: [`record`] and [`replay`] over the MCAP layout in [`recording`], and [`plot`];
-//! * the thesis' external interface: [`udp`] (`udp-gateway`).
+//! * the thesis' external interface: [`udp`] (`udp-gateway`);
+//! * the benchmark suite: [`bench`] (`bench`, over `conductor_benches::suite`).
 //!
 //! Long-running commands stop cleanly on Ctrl-C/SIGTERM ([`stop`]).
 
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod cli;
 pub mod echo;
 pub mod error;
@@ -57,12 +59,16 @@ pub fn run(cli: Cli) -> Result<()> {
         Ok(Bus::open(&d, &format!("conductor-cli/{what}"))?)
     };
     match &cli.command {
-        Command::Launch(_) | Command::Executor { .. } | Command::ScoreGateway { .. } => {
-            Err(CliError::Usage(
-                "launch runs from the conductor binary's main (it owns the process's signals)"
-                    .into(),
-            ))
-        }
+        Command::Launch(_)
+        | Command::Executor { .. }
+        | Command::ScoreGateway { .. }
+        | Command::Stress { .. }
+        | Command::PingPong => Err(CliError::Usage(
+            "launch and the helper processes run from the conductor binary's main (they own \
+             the process's signals)"
+                .into(),
+        )),
+        Command::Bench(a) => bench::run(a),
         Command::List(a) => list::run(&bus("list")?, a).map(drop),
         Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
         Command::Set(a) => get_set::set(&bus("set")?, a),

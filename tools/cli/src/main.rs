@@ -12,6 +12,8 @@ fn main() -> ExitCode {
         Command::Launch(a) => return conductor_cli::launch::run(cli.domain.as_deref(), a),
         Command::Executor { args } => return conductor_cli::launch::executor(args),
         Command::ScoreGateway { args } => return conductor_cli::launch::score_gateway(args),
+        Command::Stress { args } => return conductor_cli::bench::stress_tool(args),
+        Command::PingPong => return conductor_cli::bench::pingpong_child(),
         _ => {}
     }
     match conductor_cli::run(cli) {

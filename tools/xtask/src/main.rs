@@ -5,8 +5,9 @@
 //!   the interop packages (`tools/python-requirements.txt`), the `thumbv6m-none-eabi` target,
 //!   socat (Debian) and the emulator harness's npm packages (`npm ci`).
 //! * `test`  — `setup`, then the Score firmware build, every test of the workspace (the firmware
-//!   tests boot that image in the rp2040js emulator), the f32 build of Score, and the no_std
-//!   crates built for the RP2040's Cortex-M0+.
+//!   tests boot that image in the rp2040js emulator; tools/cli's `bench` test runs
+//!   `conductor bench --quick`), the f32 build of Score, and the no_std crates built for the
+//!   RP2040's Cortex-M0+.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
@@ -61,7 +62,7 @@ fn setup() -> Result<Vec<(String, String)>> {
     let t = Instant::now();
     let python = python_venv()?;
     rust_target(THUMB)?;
-    debian_tools(&[("socat", "socat")])?;
+    debian_tools(&[("socat", "socat"), ("cyclictest", "rt-tests")])?;
     npm_ci(&root().join("score/firmware/emulator"))?;
     eprintln!("xtask: setup done in {:.1} s", t.elapsed().as_secs_f64());
     Ok(vec![(
@@ -71,7 +72,7 @@ fn setup() -> Result<Vec<(String, String)>> {
 }
 
 /// Installs Debian packages whose command is missing (the emulator harness bridges USB CDC to
-/// pseudo-terminals with socat).
+/// pseudo-terminals with socat; `conductor bench` runs cyclictest).
 fn debian_tools(tools: &[(&str, &str)]) -> Result {
     let missing: Vec<&str> = tools
         .iter()

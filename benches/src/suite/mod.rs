@@ -1,0 +1,517 @@
+//! `conductor bench`: the thesis' stress test and the bus benchmarks as one reproducible suite,
+//! every figure measured beside its floor in the same run.
+//!
+//! One run, in order:
+//! 1. **IPC floor**: the four ping-pong paths of [`crate::pingpong`] (raw iceoryx2 busy-poll and
+//!    event-woken, the Conductor bus over each).
+//! 2. For every rate: **cyclictest** at that rate, priority and CPU (the kernel's wake-up floor),
+//!    then the **stress test** ([`conductor_executor::stress::run`]) for each number of sine
+//!    states, with the command probe: tick lateness, misses, executor CPU, sample → subscriber,
+//!    command → hardware write, the thesis' error.
+//! 3. Plots (lateness histograms beside cyclictest's per rate, the error against time per rate
+//!    and all rates together as in Fig. 3.1), `report.json` and `report.md` in the output
+//!    directory.
+//!
+//! The executor sleeps to each deadline (no spin) in every run, so a suite never leaves a
+//! SCHED_FIFO thread spinning.
+
+pub mod cyclictest;
+pub mod machine;
+pub mod plots;
+pub mod report;
+
+use std::ffi::OsString;
+use std::io::IsTerminal as _;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use conductor_executor::launcher::LaunchOptions;
+use conductor_executor::stress::{self, RunError, RunOptions, RunResult, StressConfig};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::pingpong::{self, Mode, PingPongError};
+use cyclictest::{CyclicConfig, CyclicResult};
+use machine::{load_average, utc_now, Machine};
+use plots::{Curve, Distribution, PlotError};
+use report::{CommandRow, CyclicRow, IpcRow, Quantiles, Report, StressRow};
+
+/// The rates of a full run (Hz): the thesis' 50 Hz – 10 kHz.
+pub const FULL_RATES: [f64; 6] = [50.0, 100.0, 500.0, 1000.0, 5000.0, 10_000.0];
+/// The rates of a `--quick` run (Hz).
+pub const QUICK_RATES: [f64; 2] = [100.0, 1000.0];
+/// Sine-state counts: the thesis' 3, and a 41-DOF Hubo's worth.
+pub const STATES: [usize; 2] = [3, 41];
+/// Logged seconds per run in a full run: the 15 s span of Fig. 3.1.
+pub const FULL_SECONDS: f64 = 15.0;
+/// Logged seconds per run in a `--quick` run.
+pub const QUICK_SECONDS: f64 = 3.0;
+
+/// What to do about cyclictest.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CyclicChoice {
+    /// Run it, installing `rt-tests` when missing.
+    Install,
+    /// Run it if it is installed.
+    IfInstalled,
+    /// Do not run it.
+    Skip,
+}
+
+/// The programs the suite starts: how to run the executor, the stress logger and probe, and the
+/// ping-pong child (each a program and its leading arguments).
+#[derive(Debug, Clone)]
+pub struct Helpers {
+    /// Launch options for the executor (program, leading arguments); the domain and quiet
+    /// flags are set by the suite.
+    pub launch: LaunchOptions,
+    /// The stress tool (`<tool...> log ...`, `<tool...> probe ...`).
+    pub stress_tool: Vec<OsString>,
+    /// The ping-pong child (run with [`pingpong::ROLE_ENV`] set).
+    pub pingpong_child: Vec<OsString>,
+}
+
+/// One suite run's parameters.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// A `--quick` run (recorded in the report).
+    pub quick: bool,
+    /// Rates (Hz).
+    pub rates_hz: Vec<f64>,
+    /// Numbers of sine states.
+    pub states: Vec<usize>,
+    /// Logged seconds per stress run (and cyclictest's length).
+    pub seconds: f64,
+    /// CPU of the executor and cyclictest.
+    pub cpu: usize,
+    /// SCHED_FIFO priority of both.
+    pub priority: i32,
+    /// Round trips per ping-pong path (after 1000 of warm-up).
+    pub ipc_samples: usize,
+    /// Output directory.
+    pub out: PathBuf,
+    /// cyclictest.
+    pub cyclictest: CyclicChoice,
+    /// Draw a progress bar (when stderr is a terminal).
+    pub progress: bool,
+    /// The command line, for the report.
+    pub command: String,
+    /// The helper programs.
+    pub helpers: Helpers,
+}
+
+impl Config {
+    /// The full suite (or the `--quick` one) with `helpers`, writing into `bench-out/`.
+    pub fn new(quick: bool, helpers: Helpers) -> Self {
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+        Self {
+            quick,
+            rates_hz: if quick {
+                QUICK_RATES.to_vec()
+            } else {
+                FULL_RATES.to_vec()
+            },
+            states: STATES.to_vec(),
+            seconds: if quick { QUICK_SECONDS } else { FULL_SECONDS },
+            // The last CPU: CPU 0 takes most of the machine's housekeeping.
+            cpu: cpus - 1,
+            priority: 80,
+            ipc_samples: if quick { 5_000 } else { 50_000 },
+            out: PathBuf::from("bench-out"),
+            cyclictest: CyclicChoice::Install,
+            progress: true,
+            command: String::new(),
+            helpers,
+        }
+    }
+
+    fn check(&self) -> Result<(), SuiteError> {
+        let bad = |m: String| Err(SuiteError::Invalid(m));
+        if self.rates_hz.is_empty() || self.rates_hz.iter().any(|r| !(*r > 0.0 && *r <= 1e5)) {
+            return bad(format!(
+                "rates must be in (0, 100000] Hz, got {:?}",
+                self.rates_hz
+            ));
+        }
+        if self.states.is_empty() || self.states.iter().any(|&s| s == 0 || s > 1000) {
+            return bad(format!(
+                "state counts must be in 1..=1000, got {:?}",
+                self.states
+            ));
+        }
+        if !(self.seconds > 0.0 && self.seconds <= 3600.0) {
+            return bad(format!(
+                "seconds must be in (0, 3600], got {}",
+                self.seconds
+            ));
+        }
+        if !(1..=99).contains(&self.priority) {
+            return bad(format!("priority must be 1–99, got {}", self.priority));
+        }
+        Ok(())
+    }
+}
+
+/// Why the suite stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum SuiteError {
+    /// Bad parameters.
+    #[error("{0}")]
+    Invalid(String),
+    /// Writing the output failed.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being written.
+        context: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A stress run failed.
+    #[error("stress test at {rate_hz} Hz with {states} states: {source}")]
+    Stress {
+        /// Its rate.
+        rate_hz: f64,
+        /// Its states.
+        states: usize,
+        /// Why.
+        source: RunError,
+    },
+    /// A ping-pong failed.
+    #[error("IPC ping-pong {mode}: {source}")]
+    PingPong {
+        /// The path.
+        mode: &'static str,
+        /// Why.
+        source: PingPongError,
+    },
+    /// A plot failed.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+}
+
+fn io(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> SuiteError {
+    let context = context.into();
+    move |source| SuiteError::Io { context, source }
+}
+
+/// Shows where the suite is: a bar on a terminal, a line per step otherwise.
+struct Progress {
+    bar: Option<ProgressBar>,
+    steps: u64,
+    step: u64,
+    weight_done: f64,
+}
+
+impl Progress {
+    fn new(cfg: &Config, weight: f64, steps: u64) -> Self {
+        let bar = (cfg.progress && std::io::stderr().is_terminal()).then(|| {
+            let b = ProgressBar::new((weight * 1000.0) as u64);
+            if let Ok(style) = ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:40}] {percent:>3}% (eta {eta}) {msg}",
+            ) {
+                b.set_style(style.progress_chars("=> "));
+            }
+            b.enable_steady_tick(Duration::from_millis(200));
+            b
+        });
+        Self {
+            bar,
+            steps,
+            step: 0,
+            weight_done: 0.0,
+        }
+    }
+
+    fn start(&mut self, what: &str) {
+        self.step += 1;
+        match &self.bar {
+            Some(b) => b.set_message(format!("[{}/{}] {what}", self.step, self.steps)),
+            None => eprintln!("bench: [{}/{}] {what}", self.step, self.steps),
+        }
+    }
+
+    fn done(&mut self, weight: f64) {
+        self.weight_done += weight;
+        if let Some(b) = &self.bar {
+            b.set_position((self.weight_done * 1000.0) as u64);
+        }
+    }
+
+    fn note(&self, text: &str) {
+        match &self.bar {
+            Some(b) => b.suspend(|| eprintln!("bench: note: {text}")),
+            None => eprintln!("bench: note: {text}"),
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+/// Time weights of the steps (≈ seconds), for the progress bar.
+const IPC_WEIGHT: f64 = 1.0;
+const STRESS_OVERHEAD: f64 = 1.5;
+const PLOT_WEIGHT: f64 = 0.5;
+
+/// Runs the suite and writes `report.json`, `report.md` and the plots into `cfg.out`.
+pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
+    cfg.check()?;
+    std::fs::create_dir_all(&cfg.out).map_err(io(format!("creating {}", cfg.out.display())))?;
+    let date = utc_now();
+    let mut machine = Machine::now();
+    let runs = cfg.rates_hz.len() * cfg.states.len();
+    let with_ct = cfg.cyclictest != CyclicChoice::Skip;
+    let weight = IPC_WEIGHT * Mode::ALL.len() as f64
+        + cfg.rates_hz.len() as f64 * (if with_ct { cfg.seconds } else { 0.0 } + PLOT_WEIGHT)
+        + runs as f64 * (cfg.seconds + STRESS_OVERHEAD);
+    let steps = (Mode::ALL.len() + runs + if with_ct { cfg.rates_hz.len() } else { 0 }) as u64;
+    let mut progress = Progress::new(cfg, weight, steps);
+
+    let mut cyclictest_note = None;
+    let ct_program = match cfg.cyclictest {
+        CyclicChoice::Skip => {
+            cyclictest_note = Some("skipped (--no-cyclictest)".to_string());
+            None
+        }
+        choice => match cyclictest::ensure(choice == CyclicChoice::Install) {
+            Ok(p) => Some(p),
+            Err(note) => {
+                progress.note(&format!("{note}; the kernel floor is skipped"));
+                cyclictest_note = Some(note);
+                None
+            }
+        },
+    };
+
+    let ipc = measure_ipc(cfg, &mut progress)?;
+    let event_floor = ipc
+        .iter()
+        .find(|r| r.path == Mode::RawEvent.name())
+        .map(|r| r.one_way);
+
+    let mut cyclic_rows = Vec::new();
+    let mut stress_rows = Vec::new();
+    let mut plots_written = Vec::new();
+    let mut fig31: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for &rate in &cfg.rates_hz {
+        let mut ct: Option<CyclicResult> = None;
+        if let Some(prog) = &ct_program {
+            progress.start(&format!("cyclictest at {rate} Hz"));
+            let c = CyclicConfig {
+                rate_hz: rate,
+                priority: cfg.priority,
+                cpu: cfg.cpu,
+                seconds: cfg.seconds,
+            };
+            match cyclictest::run(prog, &c) {
+                Ok(r) => ct = Some(r),
+                Err(e) => {
+                    progress.note(&format!("{e}; no kernel floor at {rate} Hz"));
+                    cyclictest_note.get_or_insert_with(|| e.to_string());
+                }
+            }
+            progress.done(cfg.seconds);
+        }
+        let ct_row = ct.as_ref().map(|r| CyclicRow {
+            rate_hz: rate,
+            command: r.command.clone(),
+            latency: Quantiles::from(&r.latency),
+            mean_ns: r.latency.mean,
+            overflows: r.overflows,
+        });
+        let mut dists = Vec::new();
+        let mut traces: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+        for &states in &cfg.states {
+            progress.start(&format!("stress test at {rate} Hz, {states} states"));
+            let r = stress_run(cfg, rate, states)?;
+            stress_rows.push(stress_row(&r, ct_row.as_ref(), event_floor.as_ref()));
+            dists.push(Distribution::from_histogram(
+                &format!("executor, {states} states"),
+                &r.lateness,
+            ));
+            traces.push((format!("{rate} Hz, {states} states"), r.trace));
+            progress.done(cfg.seconds + STRESS_OVERHEAD);
+        }
+        if let Some(r) = &ct {
+            dists.push(Distribution::from_us_buckets(
+                "cyclictest (kernel floor)",
+                &r.histogram,
+            ));
+        }
+        let name = format!("lateness-{rate}hz.png");
+        plots::lateness_png(
+            &cfg.out.join(&name),
+            &format!("Tick lateness at {rate} Hz: executor beside cyclictest"),
+            &dists,
+        )?;
+        plots_written.push(name);
+        let name = format!("error-{rate}hz.png");
+        let curves: Vec<Curve<'_>> = traces
+            .iter()
+            .map(|(l, p)| Curve {
+                label: l,
+                points: p,
+            })
+            .collect();
+        plots::error_png(
+            &cfg.out.join(&name),
+            &format!("Conductor state error at {rate} Hz (thesis Fig. 3.1)"),
+            &curves,
+        )?;
+        plots_written.push(name);
+        progress.done(PLOT_WEIGHT);
+        // Fig. 3.1 proper: the thesis' configuration (the fewest states) at every rate.
+        if let Some(t) = traces.into_iter().next() {
+            fig31.push((format!("{rate}Hz"), t.1));
+        }
+        cyclic_rows.extend(ct_row);
+    }
+    let name = "error-all-rates.png".to_string();
+    let curves: Vec<Curve<'_>> = fig31
+        .iter()
+        .map(|(l, p)| Curve {
+            label: l,
+            points: p,
+        })
+        .collect();
+    plots::error_png(
+        &cfg.out.join(&name),
+        &format!(
+            "Conductor state error for various sampling frequencies, {} states",
+            cfg.states[0]
+        ),
+        &curves,
+    )?;
+    plots_written.push(name);
+    progress.finish();
+
+    machine.load_end = load_average();
+    let report = Report {
+        schema: 1,
+        date,
+        command: cfg.command.clone(),
+        machine,
+        quick: cfg.quick,
+        rates_hz: cfg.rates_hz.clone(),
+        states: cfg.states.clone(),
+        seconds: cfg.seconds,
+        cpu: cfg.cpu,
+        priority: cfg.priority,
+        ipc,
+        cyclictest: cyclic_rows,
+        cyclictest_note,
+        stress: stress_rows,
+        plots: plots_written,
+    };
+    write(&cfg.out.join("report.json"), &json(&report))?;
+    write(&cfg.out.join("report.md"), &report.markdown())?;
+    Ok(report)
+}
+
+fn json(report: &Report) -> String {
+    // Serializing plain structs of numbers and strings cannot fail.
+    serde_json::to_string_pretty(report).unwrap_or_default() + "\n"
+}
+
+fn write(path: &Path, text: &str) -> Result<(), SuiteError> {
+    std::fs::write(path, text).map_err(io(format!("writing {}", path.display())))
+}
+
+fn measure_ipc(cfg: &Config, progress: &mut Progress) -> Result<Vec<IpcRow>, SuiteError> {
+    let mut measured = Vec::new();
+    for mode in Mode::ALL {
+        progress.start(&format!("IPC ping-pong, {}", mode.name()));
+        let p = pingpong::measure(mode, cfg.ipc_samples, &cfg.helpers.pingpong_child).map_err(
+            |source| SuiteError::PingPong {
+                mode: mode.name(),
+                source,
+            },
+        )?;
+        measured.push((mode, Quantiles::from(&p)));
+        progress.done(IPC_WEIGHT);
+    }
+    Ok(measured
+        .iter()
+        .map(|(mode, q)| {
+            let floor = measured
+                .iter()
+                .find(|(m, _)| *m == mode.floor())
+                .map_or(*q, |(_, f)| *f);
+            IpcRow {
+                path: mode.name().into(),
+                floor: mode.floor().name().into(),
+                one_way: *q,
+                over_floor: q.over(&floor),
+            }
+        })
+        .collect())
+}
+
+fn stress_run(cfg: &Config, rate_hz: f64, states: usize) -> Result<RunResult, SuiteError> {
+    let sc = StressConfig {
+        rate_hz,
+        cpu: Some(cfg.cpu),
+        priority: cfg.priority,
+        spin_us: 0.0,
+        states,
+        probe: true,
+    };
+    let mut opts = RunOptions::new(cfg.seconds);
+    opts.tool = cfg.helpers.stress_tool.clone();
+    opts.launch = LaunchOptions {
+        quiet: true,
+        handle_signals: false,
+        ..cfg.helpers.launch.clone()
+    };
+    opts.trace = true;
+    stress::run(&sc, &opts).map_err(|source| SuiteError::Stress {
+        rate_hz,
+        states,
+        source,
+    })
+}
+
+fn num<T: std::str::FromStr + Default>(
+    kv: &std::collections::HashMap<String, String>,
+    k: &str,
+) -> T {
+    kv.get(k).and_then(|v| v.parse().ok()).unwrap_or_default()
+}
+
+fn stress_row(r: &RunResult, ct: Option<&CyclicRow>, event_floor: Option<&Quantiles>) -> StressRow {
+    let lateness = Quantiles::from(&r.lateness);
+    let s2s = Quantiles::from_line(&r.summary, "e2e", "count").unwrap_or_default();
+    let command = r.probe.as_ref().map(|p| CommandRow {
+        sent: num(p, "sent"),
+        written: num(p, "written"),
+        unresolved: num(p, "unresolved"),
+        early: num(p, "early"),
+        to_write: Quantiles::from_line(p, "write", "written").unwrap_or_default(),
+        to_reflect: Quantiles::from_line(p, "reflect", "reflected").unwrap_or_default(),
+    });
+    StressRow {
+        rate_hz: r.config.rate_hz,
+        states: r.config.states,
+        rt_active: r.rt_active,
+        pinned_cpu: r.pinned_cpu,
+        ticks: r.ticks,
+        misses: r.misses,
+        achieved_hz: r.achieved_hz(),
+        cpu_percent: r.cpu_percent,
+        lateness,
+        lateness_over_cyclictest: ct.map(|c| lateness.over(&c.latency)),
+        sample_to_subscriber: s2s,
+        publish_to_subscriber: Quantiles::from_line(&r.summary, "latency", "count")
+            .unwrap_or_default(),
+        sample_to_subscriber_over_ipc: event_floor.map(|f| s2s.over(f)),
+        command,
+        samples: num(&r.summary, "count"),
+        lost: num(&r.summary, "missed"),
+        late_steps: num(&r.summary, "late_steps"),
+        thesis_error_max: num(&r.summary, "err_thesis_max"),
+        thesis_error_rms: num(&r.summary, "err_thesis_rms"),
+        pipeline_error_max: num(&r.summary, "err_sample_max"),
+    }
+}

@@ -1,0 +1,498 @@
+//! [`run`]: one stress test — launch the manifest, log it from a separate process (and probe
+//! commands from another), and take the executor's own figures over the same window.
+
+use std::collections::HashMap;
+use std::ffi::OsString;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use conductor_bus::histogram::{bucket_range, Histogram, BUCKETS};
+use conductor_bus::{monotonic_ns, Bus, BusError, Domain, ExecutorStats, StatsSubscriber};
+
+use super::{manifest, parse_line, sine_states, StressConfig, PROBE_STATE, SUBSYSTEM};
+use crate::launcher::{Launch, LaunchError, LaunchOptions};
+
+/// Why a stress run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A file or process operation failed.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The executor could not be launched.
+    #[error("launching the stress manifest: {0}")]
+    Launch(#[from] LaunchError),
+    /// The bus refused a service.
+    #[error("bus: {0}")]
+    Bus(#[from] BusError),
+    /// A helper process (logger or probe) failed.
+    #[error("the {what} process failed ({status}): {stderr}")]
+    Helper {
+        /// `logger` or `probe`.
+        what: &'static str,
+        /// Its exit status.
+        status: std::process::ExitStatus,
+        /// Its standard error.
+        stderr: String,
+    },
+    /// The executor published no statistics.
+    #[error("the executor published no statistics within {0:?}")]
+    NoStats(Duration),
+    /// Bad parameters.
+    #[error("{0}")]
+    Invalid(String),
+}
+
+fn io(context: impl Into<String>) -> impl FnOnce(std::io::Error) -> RunError {
+    let context = context.into();
+    move |source| RunError::Io { context, source }
+}
+
+/// How to run a stress test.
+#[derive(Debug, Clone)]
+pub struct RunOptions {
+    /// Logged window (s).
+    pub seconds: f64,
+    /// Time between subscribing and opening the window.
+    pub settle: Duration,
+    /// The stress tool's program and leading arguments: the logger and the probe run as
+    /// `<tool...> log ...` and `<tool...> probe ...` (e.g. `conductor-stress`, or
+    /// `conductor __stress`).
+    pub tool: Vec<OsString>,
+    /// How to launch the executor (its domain is always a fresh unique one).
+    pub launch: LaunchOptions,
+    /// Keep the generated manifest here instead of a temporary file.
+    pub manifest_out: Option<PathBuf>,
+    /// Return the first state's thesis error against time ([`RunResult::trace`]).
+    pub trace: bool,
+    /// Mean interval between probe commands (with [`StressConfig::probe`]); `None`: 10 ms or
+    /// 4 base periods, whichever is longer.
+    pub probe_interval: Option<Duration>,
+}
+
+impl RunOptions {
+    /// A `seconds` window, the logger being this program (`<current exe> log ...`).
+    pub fn new(seconds: f64) -> Self {
+        Self {
+            seconds,
+            settle: Duration::from_millis(300),
+            tool: std::env::current_exe()
+                .map(|p| vec![p.into_os_string()])
+                .unwrap_or_else(|_| vec!["conductor-stress".into()]),
+            launch: LaunchOptions {
+                quiet: true,
+                handle_signals: false,
+                ..LaunchOptions::default()
+            },
+            manifest_out: None,
+            trace: false,
+            probe_interval: None,
+        }
+    }
+}
+
+/// The outcome of one stress run.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    /// What ran.
+    pub config: StressConfig,
+    /// The executor's thread ran SCHED_FIFO.
+    pub rt_active: bool,
+    /// The CPU it was pinned to, if any.
+    pub pinned_cpu: Option<usize>,
+    /// Executor figures over the window (between two stats messages `window_ns` apart): base
+    /// ticks executed.
+    pub ticks: u64,
+    /// Deadlines missed (slots skipped) in the window.
+    pub misses: u64,
+    /// Tick lateness (wake-up time − deadline) of the window's ticks. Its max is exact when the
+    /// window set the run's record, else the upper bound of its bucket (≤ 12.5 % over).
+    pub lateness: Histogram,
+    /// Time between the two stats messages (ns).
+    pub window_ns: u64,
+    /// CPU time of the executor process over the window, in % of one CPU (from /proc).
+    pub cpu_percent: Option<f64>,
+    /// The logger's line per sine state (`key → value`, see [`super::StateReport::line`]).
+    pub states: Vec<HashMap<String, String>>,
+    /// The logger's summary over all sine states ([`super::Summary::line`]).
+    pub summary: HashMap<String, String>,
+    /// The probe's line ([`super::ProbeReport::line`]), with [`StressConfig::probe`].
+    pub probe: Option<HashMap<String, String>>,
+    /// With [`RunOptions::trace`]: `(seconds since the window opened, sin(t_L) − value)` of the
+    /// first state.
+    pub trace: Vec<(f64, f64)>,
+}
+
+impl RunResult {
+    /// Ticks per second over the window.
+    pub fn achieved_hz(&self) -> f64 {
+        if self.window_ns == 0 {
+            0.0
+        } else {
+            self.ticks as f64 * 1e9 / self.window_ns as f64
+        }
+    }
+
+    /// The executor's line: `executor: ticks=.. misses=.. lateness_p50_us=..`.
+    pub fn executor_line(&self) -> String {
+        let h = &self.lateness;
+        format!(
+            "executor: ticks={} misses={} rt={} cpu={} cpu_percent={} lateness_p50_us={:.1} \
+             lateness_p99_us={:.1} lateness_p999_us={:.1} lateness_max_us={:.1} achieved_hz={:.1}",
+            self.ticks,
+            self.misses,
+            u8::from(self.rt_active),
+            self.pinned_cpu.map_or(-1, |c| c as i64),
+            self.cpu_percent
+                .map_or_else(|| "n/a".to_string(), |c| format!("{c:.1}")),
+            h.quantile(0.5) as f64 / 1e3,
+            h.quantile(0.99) as f64 / 1e3,
+            h.quantile(0.999) as f64 / 1e3,
+            h.max() as f64 / 1e3,
+            self.achieved_hz()
+        )
+    }
+}
+
+/// CPU time (ns) used so far by every thread of process `pid`: the sum of the first field of
+/// `/proc/<pid>/task/*/schedstat` (nanosecond resolution), else `utime + stime` of
+/// `/proc/<pid>/stat` (clock-tick resolution).
+pub fn process_cpu_ns(pid: u32) -> std::io::Result<u64> {
+    let tasks = Path::new("/proc").join(pid.to_string()).join("task");
+    let mut total = 0u64;
+    let mut any = false;
+    if let Ok(dir) = std::fs::read_dir(&tasks) {
+        for t in dir.flatten() {
+            if let Ok(s) = std::fs::read_to_string(t.path().join("schedstat")) {
+                if let Some(ns) = s
+                    .split_whitespace()
+                    .next()
+                    .and_then(|f| f.parse::<u64>().ok())
+                {
+                    total += ns;
+                    any = true;
+                }
+            }
+        }
+    }
+    if any {
+        return Ok(total);
+    }
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat"))?;
+    let bad = || std::io::Error::new(std::io::ErrorKind::InvalidData, "unexpected /proc stat");
+    // Fields after the command name (which may hold spaces) start at field 3; utime and stime
+    // are fields 14 and 15.
+    let rest = stat.rsplit_once(')').ok_or_else(bad)?.1;
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: u64 = f.get(11).and_then(|v| v.parse().ok()).ok_or_else(bad)?;
+    let sticks: u64 = f.get(12).and_then(|v| v.parse().ok()).ok_or_else(bad)?;
+    // SAFETY: sysconf has no preconditions.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as u64;
+    Ok((ticks + sticks) * 1_000_000_000 / hz)
+}
+
+/// The ticks between two stats messages of one executor.
+fn window_lateness(a: &ExecutorStats, b: &ExecutorStats) -> Histogram {
+    let mut counts = [0u64; BUCKETS];
+    let mut top = None;
+    for (i, c) in counts.iter_mut().enumerate() {
+        *c = b.histogram[i].saturating_sub(a.histogram[i]);
+        if *c > 0 {
+            top = Some(i);
+        }
+    }
+    let max = if b.lateness_max_ns > a.lateness_max_ns {
+        b.lateness_max_ns
+    } else {
+        top.map_or(0, |i| bucket_range(i).1.min(b.lateness_max_ns))
+    };
+    Histogram::from_counts(&counts, max)
+}
+
+/// The newest stats, waiting up to `timeout` for the first (or for one newer than `after`).
+fn stats(
+    sub: &mut StatsSubscriber,
+    after: u64,
+    timeout: Duration,
+) -> Result<ExecutorStats, RunError> {
+    let end = Instant::now() + timeout;
+    loop {
+        if let Some(s) = sub.latest()?.filter(|s| s.seq > after) {
+            return Ok(s);
+        }
+        if Instant::now() > end {
+            return Err(RunError::NoStats(timeout));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+fn spawn(tool: &[OsString], args: &[OsString], what: &str) -> Result<Child, RunError> {
+    let (prog, lead) = tool
+        .split_first()
+        .ok_or_else(|| RunError::Invalid("RunOptions::tool is empty".into()))?;
+    Command::new(prog)
+        .args(lead)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .map_err(io(format!(
+            "starting the {what} ({})",
+            prog.to_string_lossy()
+        )))
+}
+
+fn finish(child: Child, what: &'static str) -> Result<Vec<String>, RunError> {
+    let out = child
+        .wait_with_output()
+        .map_err(io(format!("waiting for the {what}")))?;
+    if !out.status.success() {
+        return Err(RunError::Helper {
+            what,
+            status: out.status,
+            stderr: String::from_utf8_lossy(&out.stderr).trim().to_string(),
+        });
+    }
+    Ok(BufReader::new(&out.stdout[..])
+        .lines()
+        .map_while(Result::ok)
+        .collect())
+}
+
+/// Runs the stress test of `cfg`: launches its manifest in a fresh domain, starts the logger
+/// (and, with `cfg.probe`, the command probe) as separate processes, takes the executor's stats
+/// and CPU time at the window's start and end, and stops everything.
+pub fn run(cfg: &StressConfig, opts: &RunOptions) -> Result<RunResult, RunError> {
+    if !(opts.seconds > 0.0 && cfg.rate_hz > 0.0 && cfg.states > 0) {
+        return Err(RunError::Invalid(format!(
+            "a stress run needs seconds > 0, rate > 0 and states > 0 (got {} s, {} Hz, {} states)",
+            opts.seconds, cfg.rate_hz, cfg.states
+        )));
+    }
+    let temporary = opts.manifest_out.is_none();
+    let path = opts.manifest_out.clone().unwrap_or_else(|| {
+        std::env::temp_dir().join(format!(
+            "conductor-stress-{}-{}.toml",
+            std::process::id(),
+            monotonic_ns()
+        ))
+    });
+    std::fs::write(&path, manifest(cfg)).map_err(io(format!("writing {}", path.display())))?;
+    let result = run_manifest(cfg, opts, &path);
+    if temporary {
+        let _ = std::fs::remove_file(&path);
+    }
+    result
+}
+
+fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<RunResult, RunError> {
+    let domain = Domain::unique("stress")?;
+    let launch = Launch::start(
+        path,
+        LaunchOptions {
+            domain: Some(domain.name().into()),
+            ..opts.launch.clone()
+        },
+    )?;
+    let pid = launch.pid(SUBSYSTEM);
+    let bus = Bus::open(&domain, "stress-report")?;
+    let mut stats_sub = StatsSubscriber::new(&bus, SUBSYSTEM)?;
+
+    let secs = opts.seconds.to_string();
+    let settle_ms = opts.settle.as_millis().to_string();
+    let trace_path = std::env::temp_dir().join(format!(
+        "conductor-stress-trace-{}-{}.txt",
+        std::process::id(),
+        monotonic_ns()
+    ));
+    let mut log_args: Vec<OsString> = ["log", "--domain", domain.name(), "--sine", "--summary"]
+        .iter()
+        .map(Into::into)
+        .collect();
+    log_args.extend(
+        [
+            "--states",
+            &sine_states(cfg).join(","),
+            "--seconds",
+            &secs,
+            "--settle-ms",
+            &settle_ms,
+        ]
+        .iter()
+        .map(Into::into),
+    );
+    if opts.trace {
+        log_args.push("--trace".into());
+        log_args.push(trace_path.clone().into());
+    }
+    let logger = spawn(&opts.tool, &log_args, "logger")?;
+    let probe = if cfg.probe {
+        let interval = opts.probe_interval.unwrap_or_else(|| {
+            Duration::from_millis(10).max(Duration::from_secs_f64(4.0 / cfg.rate_hz))
+        });
+        let args: Vec<OsString> = [
+            "probe",
+            "--domain",
+            domain.name(),
+            "--state",
+            &format!("{SUBSYSTEM}/{PROBE_STATE}"),
+            "--seconds",
+            &secs,
+            "--settle-ms",
+            &settle_ms,
+            "--interval-us",
+            &interval.as_micros().to_string(),
+        ]
+        .iter()
+        .map(Into::into)
+        .collect();
+        Some(spawn(&opts.tool, &args, "probe")?)
+    } else {
+        None
+    };
+
+    // The executor's window: from the stats message after the helpers' settle time to the one
+    // `seconds` later (stats come every 100 ms).
+    std::thread::sleep(opts.settle);
+    let a = stats(&mut stats_sub, 0, Duration::from_secs(2))?;
+    let cpu_a = pid.and_then(|p| process_cpu_ns(p).ok());
+    let wall_a = monotonic_ns();
+    std::thread::sleep(Duration::from_secs_f64(opts.seconds));
+    let b = stats(&mut stats_sub, a.seq, Duration::from_secs(2))?;
+    let cpu_b = pid.and_then(|p| process_cpu_ns(p).ok());
+    let wall_b = monotonic_ns();
+
+    let log_lines = finish(logger, "logger");
+    let probe_lines = probe.map(|p| finish(p, "probe")).transpose();
+    drop(stats_sub);
+    drop(bus);
+    launch.stop();
+    let ended = launch.wait();
+    let trace = if opts.trace {
+        let t = read_trace(&trace_path);
+        let _ = std::fs::remove_file(&trace_path);
+        t?
+    } else {
+        Vec::new()
+    };
+    let log_lines = log_lines?;
+    let probe_lines = probe_lines?;
+    ended?;
+
+    let parsed: Vec<HashMap<String, String>> = log_lines.iter().map(|l| parse_line(l)).collect();
+    let states: Vec<_> = parsed
+        .iter()
+        .filter(|kv| kv.contains_key("state"))
+        .cloned()
+        .collect();
+    let summary = parsed
+        .iter()
+        .find(|kv| kv.contains_key("summary"))
+        .cloned()
+        .unwrap_or_default();
+    let probe = probe_lines.and_then(|lines| {
+        lines
+            .iter()
+            .map(|l| parse_line(l))
+            .find(|kv| kv.contains_key("probe"))
+    });
+    let cpu_percent = match (cpu_a, cpu_b) {
+        (Some(x), Some(y)) if wall_b > wall_a => {
+            Some(y.saturating_sub(x) as f64 * 100.0 / (wall_b - wall_a) as f64)
+        }
+        _ => None,
+    };
+    Ok(RunResult {
+        config: *cfg,
+        rt_active: b.rt_active != 0,
+        pinned_cpu: usize::try_from(b.cpu).ok(),
+        ticks: b.ticks - a.ticks,
+        misses: b.misses - a.misses,
+        lateness: window_lateness(&a, &b),
+        window_ns: b.t_ns.saturating_sub(a.t_ns),
+        cpu_percent,
+        states,
+        summary,
+        probe,
+        trace,
+    })
+}
+
+/// Reads a trace written by `log --trace`: lines of `<t_L ns> <error>`; times are returned in
+/// seconds since the first line.
+fn read_trace(path: &Path) -> Result<Vec<(f64, f64)>, RunError> {
+    let text = std::fs::read_to_string(path).map_err(io(format!("reading {}", path.display())))?;
+    let mut out = Vec::new();
+    let mut t0 = None;
+    for line in text.lines() {
+        let mut f = line.split_whitespace();
+        let (Some(Ok(t)), Some(Ok(e))) = (
+            f.next().map(str::parse::<u64>),
+            f.next().map(str::parse::<f64>),
+        ) else {
+            return Err(RunError::Invalid(format!(
+                "{}: a trace line is not `<ns> <error>`: {line:?}",
+                path.display()
+            )));
+        };
+        let t0 = *t0.get_or_insert(t);
+        out.push((t.saturating_sub(t0) as f64 * 1e-9, e));
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use conductor_bus::histogram::bucket_of;
+
+    #[test]
+    fn cpu_time_of_this_process_grows_with_work() {
+        let me = std::process::id();
+        let a = process_cpu_ns(me).unwrap();
+        // Burn about 20 ms of CPU; the reading must grow by at least part of it (schedstat is in
+        // ns; the /proc/stat fallback in clock ticks of 10 ms at most).
+        let t = Instant::now();
+        let mut x = 0u64;
+        while t.elapsed() < Duration::from_millis(20) {
+            x = std::hint::black_box(x.wrapping_add(1));
+        }
+        let b = process_cpu_ns(me).unwrap();
+        assert!(b > a, "{a} → {b}");
+    }
+
+    #[test]
+    fn the_window_is_the_difference_of_two_stats_messages() {
+        let mut a = ExecutorStats::default();
+        let mut b = ExecutorStats::default();
+        a.histogram[bucket_of(1_000)] = 5;
+        a.lateness_max_ns = 90_000;
+        b.histogram[bucket_of(1_000)] = 8;
+        b.histogram[bucket_of(20_000)] = 2;
+        b.lateness_max_ns = 90_000;
+        let w = window_lateness(&a, &b);
+        assert_eq!(w.count(), 5);
+        // No new record in the window: the max is its top bucket's bound.
+        assert_eq!(w.max(), bucket_range(bucket_of(20_000)).1);
+        b.histogram[bucket_of(200_000)] = 1;
+        b.lateness_max_ns = 200_000;
+        assert_eq!(window_lateness(&a, &b).max(), 200_000);
+    }
+
+    #[test]
+    fn traces_are_read_back_relative_to_their_start() {
+        let p = std::env::temp_dir().join(format!("trace-test-{}.txt", std::process::id()));
+        std::fs::write(&p, "1000000000 0.5\n1500000000 -0.25\n").unwrap();
+        assert_eq!(read_trace(&p).unwrap(), vec![(0.0, 0.5), (0.5, -0.25)]);
+        std::fs::write(&p, "1 x\n").unwrap();
+        assert!(matches!(read_trace(&p), Err(RunError::Invalid(_))));
+        let _ = std::fs::remove_file(&p);
+    }
+}

@@ -1,0 +1,313 @@
+//! The stress test's command line, shared by `conductor-stress` and `conductor bench`'s helper
+//! processes (`conductor __stress ...`):
+//!
+//! * `run` launches the stress manifest, logs it from a separate process and prints the report;
+//! * `log` is that logger: it counts each state's samples whose sample time falls in a window
+//!   and prints one `key=value` line per state (also used by the executor's tests as the
+//!   external subscriber process), optionally a summary line and the Fig. 3.1 trace;
+//! * `probe` is the external controller of the command probe ([`super::CommandProbe`]).
+
+use std::ffi::OsString;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::{Parser, Subcommand};
+use conductor_bus::{monotonic_ns, Bus, Domain};
+
+use super::{run, CommandProbe, Logger, RunOptions, StressConfig};
+use crate::launcher::LaunchOptions;
+
+/// `conductor-stress`.
+#[derive(Debug, Parser)]
+#[command(
+    name = "conductor-stress",
+    version,
+    about = "The thesis' stress test: sine states at a rate, an external logger and a command probe"
+)]
+pub struct StressCli {
+    /// What to do.
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+/// The sub-commands.
+#[derive(Debug, Subcommand)]
+pub enum Cmd {
+    /// Launch the stress manifest and log it from another process.
+    Run {
+        /// Sample rate (Hz).
+        #[arg(long, default_value_t = 1000.0)]
+        rate: f64,
+        /// Logged duration (s).
+        #[arg(long, default_value_t = 5.0)]
+        seconds: f64,
+        /// Number of sine states.
+        #[arg(long, default_value_t = 3)]
+        states: usize,
+        /// CPU for the executor.
+        #[arg(long)]
+        cpu: Option<usize>,
+        /// SCHED_FIFO priority.
+        #[arg(long, default_value_t = 80)]
+        priority: i32,
+        /// Spin this long before each deadline (µs).
+        #[arg(long, default_value_t = 0.0)]
+        spin_us: f64,
+        /// Run the executor without real-time set-up.
+        #[arg(long)]
+        no_rt: bool,
+        /// Also measure controller command → hardware write with a probe process.
+        #[arg(long)]
+        probe: bool,
+        /// Keep the generated manifest here instead of a temporary file.
+        #[arg(long)]
+        manifest_out: Option<PathBuf>,
+    },
+    /// Subscribe to states and report what arrived (one `key=value` line per state).
+    Log {
+        /// Bus domain.
+        #[arg(long)]
+        domain: String,
+        /// States to log, `subsystem/state`, comma-separated.
+        #[arg(long, value_delimiter = ',', required = true)]
+        states: Vec<String>,
+        /// Window length (s) over which samples are counted by their sample time.
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+        /// Wait this long (ms) after subscribing before the window opens.
+        #[arg(long, default_value_t = 200)]
+        settle_ms: u64,
+        /// The states carry sin(t_S): report the thesis' errors.
+        #[arg(long)]
+        sine: bool,
+        /// Also print a `summary=all` line over every state.
+        #[arg(long)]
+        summary: bool,
+        /// Write the first state's `<t_L ns> <sin(t_L) − value>` per sample here (with --sine).
+        #[arg(long)]
+        trace: Option<PathBuf>,
+    },
+    /// Send setpoints to a loopback state and time them (one `probe=...` line).
+    Probe {
+        /// Bus domain.
+        #[arg(long)]
+        domain: String,
+        /// The writable loopback state, `subsystem/state`.
+        #[arg(long)]
+        state: String,
+        /// Probing time (s).
+        #[arg(long, default_value_t = 2.0)]
+        seconds: f64,
+        /// Wait this long (ms) after subscribing before the first command.
+        #[arg(long, default_value_t = 200)]
+        settle_ms: u64,
+        /// Mean interval between commands (µs); each is drawn from 0.5–1.5× this, so commands
+        /// land at random phases of the executor's tick.
+        #[arg(long, default_value_t = 10_000)]
+        interval_us: u64,
+    },
+}
+
+/// Where `run` finds its helpers and executor.
+#[derive(Debug, Clone)]
+pub struct ToolContext {
+    /// This tool's program and leading arguments (for the logger and probe processes).
+    pub tool: Vec<OsString>,
+    /// How to launch the executor.
+    pub launch: LaunchOptions,
+}
+
+/// Runs the tool with `args` (program name first).
+pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext) -> ExitCode {
+    let cli = match StressCli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { 2 } else { 0 });
+        }
+    };
+    let (what, result) = match cli.cmd {
+        Cmd::Log {
+            domain,
+            states,
+            seconds,
+            settle_ms,
+            sine,
+            summary,
+            trace,
+        } => (
+            "log",
+            log(&domain, &states, seconds, settle_ms, sine, summary, trace),
+        ),
+        Cmd::Probe {
+            domain,
+            state,
+            seconds,
+            settle_ms,
+            interval_us,
+        } => (
+            "probe",
+            probe(&domain, &state, seconds, settle_ms, interval_us),
+        ),
+        Cmd::Run {
+            rate,
+            seconds,
+            states,
+            cpu,
+            priority,
+            spin_us,
+            no_rt,
+            probe,
+            manifest_out,
+        } => {
+            let cfg = StressConfig {
+                rate_hz: rate,
+                cpu,
+                priority,
+                spin_us,
+                states,
+                probe,
+            };
+            let mut opts = RunOptions::new(seconds);
+            opts.tool = ctx.tool;
+            opts.launch = LaunchOptions {
+                no_rt,
+                ..ctx.launch
+            };
+            opts.manifest_out = manifest_out;
+            ("run", run_and_print(&cfg, &opts))
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            crate::note!("conductor-stress {what}: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn log(
+    domain: &str,
+    states: &[String],
+    seconds: f64,
+    settle_ms: u64,
+    sine: bool,
+    summary: bool,
+    trace: Option<PathBuf>,
+) -> Result<(), String> {
+    let domain = Domain::new(domain).map_err(|e| e.to_string())?;
+    let bus = Bus::open(&domain, "stress-logger").map_err(|e| e.to_string())?;
+    // The states may still be coming up: retry for a while.
+    let give_up = Instant::now() + Duration::from_secs(10);
+    let mut logger = loop {
+        match Logger::new(&bus, states, sine) {
+            Ok(l) => break l,
+            Err(e) if Instant::now() > give_up => return Err(e.to_string()),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    };
+    if trace.is_some() {
+        let rate = logger.reports().first().map_or(0.0, |r| r.rate_hz);
+        // One point per sample of the window, plus room for a late tail.
+        logger.keep_trace(((rate * (seconds + 1.0)) as usize).min(20_000_000));
+    }
+    let t0 = monotonic_ns() + settle_ms * 1_000_000;
+    let t1 = t0 + (seconds * 1e9) as u64;
+    logger.set_window(t0, t1);
+    // Samples of the window's last instants arrive a little after it closes.
+    while monotonic_ns() < t1 + 100_000_000 {
+        logger.poll().map_err(|e| e.to_string())?;
+        logger
+            .wait(Duration::from_millis(5))
+            .map_err(|e| e.to_string())?;
+    }
+    logger.poll().map_err(|e| e.to_string())?;
+    if let Some(path) = trace {
+        let mut text = String::with_capacity(logger.trace().len() * 24);
+        for (t, e) in logger.trace() {
+            text += &format!("{t} {e:e}\n");
+        }
+        std::fs::write(&path, text).map_err(|e| format!("writing {}: {e}", path.display()))?;
+    }
+    let mut out = std::io::stdout().lock();
+    for r in logger.reports() {
+        writeln!(out, "{}", r.line()).map_err(|e| e.to_string())?;
+    }
+    if summary {
+        writeln!(out, "{}", logger.summary().line()).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+fn probe(
+    domain: &str,
+    state: &str,
+    seconds: f64,
+    settle_ms: u64,
+    interval_us: u64,
+) -> Result<(), String> {
+    let domain = Domain::new(domain).map_err(|e| e.to_string())?;
+    let bus = Bus::open(&domain, "stress-probe").map_err(|e| e.to_string())?;
+    let give_up = Instant::now() + Duration::from_secs(10);
+    let mut probe = loop {
+        match CommandProbe::new(&bus, state) {
+            Ok(p) => break p,
+            Err(e) if Instant::now() > give_up => return Err(e.to_string()),
+            Err(_) => std::thread::sleep(Duration::from_millis(20)),
+        }
+    };
+    let start = Instant::now() + Duration::from_millis(settle_ms);
+    let end = start + Duration::from_secs_f64(seconds);
+    // xorshift64: a phase generator needs no crate; seeded from the clock so runs differ.
+    let mut rng = monotonic_ns() | 1;
+    let mut uniform = move || {
+        rng ^= rng << 13;
+        rng ^= rng >> 7;
+        rng ^= rng << 17;
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mean = Duration::from_micros(interval_us.max(1));
+    let mut next = start + mean.mul_f64(uniform());
+    while next < end {
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+        probe.poll().map_err(|e| e.to_string())?;
+        probe.send().map_err(|e| e.to_string())?;
+        next += mean.mul_f64(0.5 + uniform());
+    }
+    // The last command is written within a few ticks.
+    std::thread::sleep(Duration::from_millis(100).max(mean));
+    probe.poll().map_err(|e| e.to_string())?;
+    println!("{}", probe.report().line());
+    Ok(())
+}
+
+fn run_and_print(cfg: &StressConfig, opts: &RunOptions) -> Result<(), String> {
+    let r = run(cfg, opts).map_err(|e| e.to_string())?;
+    println!(
+        "stress test: {} sine states at {} Hz, logged for {} s by a separate process",
+        cfg.states, cfg.rate_hz, opts.seconds
+    );
+    println!("{}", r.executor_line());
+    let line = |kv: &std::collections::HashMap<String, String>, first: &str| {
+        let mut keys: Vec<&String> = kv.keys().filter(|k| *k != first).collect();
+        keys.sort();
+        let mut s = format!("{first}={}", kv[first]);
+        for k in keys {
+            s += &format!(" {k}={}", kv[k]);
+        }
+        s
+    };
+    for s in &r.states {
+        println!("{}", line(s, "state"));
+    }
+    if !r.summary.is_empty() {
+        println!("{}", line(&r.summary, "summary"));
+    }
+    if let Some(p) = &r.probe {
+        println!("{}", line(p, "probe"));
+    }
+    Ok(())
+}

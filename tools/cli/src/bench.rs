@@ -1,0 +1,108 @@
+//! `conductor bench`: the benchmark suite of `conductor_benches::suite`, with this same binary
+//! as every helper process — the executor (`__executor`), the stress logger and command probe
+//! (`__stress`) and the ping-pong child (`__pingpong`) — so `conductor` alone runs it.
+
+use std::ffi::OsString;
+use std::process::ExitCode;
+
+use conductor_benches::pingpong;
+use conductor_benches::suite::{self, CyclicChoice, Helpers};
+use conductor_executor::launcher::LaunchOptions;
+use conductor_executor::stress::tool::{self, ToolContext};
+
+use crate::cli::BenchArgs;
+use crate::error::{CliError, Result};
+
+fn me() -> Result<OsString> {
+    std::env::current_exe()
+        .map(|p| p.into_os_string())
+        .map_err(|e| CliError::os("finding my own program to run the helpers", e))
+}
+
+fn executor_launch(me: &OsString) -> LaunchOptions {
+    LaunchOptions {
+        executor: me.into(),
+        executor_args: vec!["__executor".into()],
+        quiet: true,
+        handle_signals: false,
+        ..LaunchOptions::default()
+    }
+}
+
+/// Runs the suite; prints the Markdown report and where the files are.
+pub fn run(a: &BenchArgs) -> Result<()> {
+    let me = me()?;
+    let helpers = Helpers {
+        launch: executor_launch(&me),
+        stress_tool: vec![me.clone(), "__stress".into()],
+        pingpong_child: vec![me, "__pingpong".into()],
+    };
+    let mut cfg = suite::Config::new(a.quick, helpers);
+    if !a.rates.is_empty() {
+        cfg.rates_hz = a.rates.clone();
+    }
+    if !a.states.is_empty() {
+        cfg.states = a.states.clone();
+    }
+    if let Some(s) = a.seconds {
+        cfg.seconds = s;
+    }
+    if let Some(c) = a.cpu {
+        cfg.cpu = c;
+    }
+    if let Some(n) = a.ipc_samples {
+        cfg.ipc_samples = n;
+    }
+    cfg.priority = a.priority;
+    cfg.out = a.out.clone();
+    cfg.progress = !a.no_progress;
+    cfg.cyclictest = match (a.no_cyclictest, a.no_install) {
+        (true, _) => CyclicChoice::Skip,
+        (false, true) => CyclicChoice::IfInstalled,
+        (false, false) => CyclicChoice::Install,
+    };
+    cfg.command = std::env::args().collect::<Vec<_>>().join(" ");
+    let report = suite::run(&cfg).map_err(|e| CliError::Usage(format!("bench: {e}")))?;
+    println!("{}", report.markdown());
+    eprintln!(
+        "bench: wrote {0}/report.md, {0}/report.json and {1} plots",
+        cfg.out.display(),
+        report.plots.len()
+    );
+    Ok(())
+}
+
+/// `conductor __stress ...`: the stress test's logger and probe processes.
+pub fn stress_tool(args: &[OsString]) -> ExitCode {
+    let me = match me() {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("conductor: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let ctx = ToolContext {
+        tool: vec![me.clone(), "__stress".into()],
+        launch: executor_launch(&me),
+    };
+    let argv = std::iter::once(OsString::from("conductor __stress")).chain(args.iter().cloned());
+    tool::main_with_args(argv, ctx)
+}
+
+/// `conductor __pingpong`: the receiving side of the IPC ping-pong.
+pub fn pingpong_child() -> ExitCode {
+    match pingpong::child_from_env() {
+        Some(Ok(())) => ExitCode::SUCCESS,
+        Some(Err(e)) => {
+            eprintln!("conductor __pingpong: {e}");
+            ExitCode::FAILURE
+        }
+        None => {
+            eprintln!(
+                "conductor __pingpong: {} is not set (this is a helper of `conductor bench`)",
+                pingpong::ROLE_ENV
+            );
+            ExitCode::from(2)
+        }
+    }
+}

@@ -1,0 +1,166 @@
+//! `conductor bench --quick` end to end: it runs the whole suite (IPC ping-pong, cyclictest when
+//! installed, the stress test at every quick rate with 3 and 41 states) and writes a well-formed
+//! report: JSON that parses with every row, PNGs with the right signature and size, and a
+//! Markdown table row per configured rate and state count. The figures themselves are not
+//! checked: they depend on the machine. The executor sleeps to its deadlines (no spin), so the
+//! SCHED_FIFO thread never spins during the test; it takes about 30 s.
+
+use std::collections::BTreeSet;
+use std::path::Path;
+use std::process::Command;
+
+use conductor_benches::suite::{cyclictest, plots, QUICK_RATES, STATES};
+use serde_json::Value;
+
+/// Width and height from a PNG's IHDR chunk, after checking the signature.
+fn png_size(path: &Path) -> (u32, u32) {
+    let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    assert!(b.len() > 33, "{}: too short for a PNG", path.display());
+    assert_eq!(
+        &b[..8],
+        b"\x89PNG\r\n\x1a\n",
+        "{}: not a PNG",
+        path.display()
+    );
+    assert_eq!(&b[12..16], b"IHDR", "{}: first chunk", path.display());
+    let be = |i: usize| u32::from_be_bytes(b[i..i + 4].try_into().unwrap());
+    (be(16), be(20))
+}
+
+/// The first cell of every body row of each Markdown table whose header starts with
+/// `| rate Hz | states |`, with the second cell: one set per table.
+fn table_rows(md: &str) -> Vec<Vec<(String, String)>> {
+    let mut tables = Vec::new();
+    let mut current: Option<Vec<(String, String)>> = None;
+    for line in md.lines() {
+        if line.starts_with("| rate Hz | states |") {
+            current = Some(Vec::new());
+            continue;
+        }
+        match (&mut current, line.starts_with('|')) {
+            (Some(_), true) if line.starts_with("|---") => {}
+            (Some(rows), true) => {
+                let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+                rows.push((cells[1].to_string(), cells[2].to_string()));
+            }
+            (Some(_), false) => tables.push(current.take().unwrap()),
+            (None, _) => {}
+        }
+    }
+    tables.extend(current);
+    tables
+}
+
+fn quantiles_ok(v: &Value, what: &str) {
+    for k in ["count", "p50_ns", "p99_ns", "p999_ns", "max_ns"] {
+        assert!(v[k].is_u64(), "{what}.{k} is not a count/ns: {v}");
+    }
+    assert!(v["count"].as_u64().unwrap() > 0, "{what}: nothing measured");
+}
+
+#[test]
+fn quick_bench_writes_a_table_json_and_plots() {
+    let out = std::env::temp_dir().join(format!("conductor-bench-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let run = Command::new(env!("CARGO_BIN_EXE_conductor"))
+        .args(["bench", "--quick", "--no-progress", "--no-install", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "conductor bench --quick failed:\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+
+    // JSON: parses, and holds a row for every configured rate × state count.
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    let j: Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(j["schema"], 1);
+    assert_eq!(j["quick"], true);
+    let rates: Vec<f64> = j["rates_hz"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r.as_f64().unwrap())
+        .collect();
+    assert_eq!(rates, QUICK_RATES);
+    let ipc = j["ipc"].as_array().unwrap();
+    assert_eq!(ipc.len(), 4, "four ping-pong paths");
+    for r in ipc {
+        quantiles_ok(&r["one_way"], r["path"].as_str().unwrap());
+    }
+    let stress = j["stress"].as_array().unwrap();
+    assert_eq!(stress.len(), QUICK_RATES.len() * STATES.len());
+    for (i, row) in stress.iter().enumerate() {
+        let (rate, states) = (QUICK_RATES[i / STATES.len()], STATES[i % STATES.len()]);
+        assert_eq!(row["rate_hz"].as_f64(), Some(rate));
+        assert_eq!(row["states"].as_u64(), Some(states as u64));
+        let what = format!("{rate} Hz × {states}");
+        quantiles_ok(&row["lateness"], &format!("{what} lateness"));
+        quantiles_ok(
+            &row["sample_to_subscriber"],
+            &format!("{what} sample→subscriber"),
+        );
+        quantiles_ok(
+            &row["command"]["to_write"],
+            &format!("{what} command→write"),
+        );
+        for k in ["ticks", "misses", "samples", "lost", "late_steps"] {
+            assert!(row[k].is_u64(), "{what}: {k} = {}", row[k]);
+        }
+        for k in ["thesis_error_max", "thesis_error_rms", "pipeline_error_max"] {
+            assert!(row[k].is_f64(), "{what}: {k} = {}", row[k]);
+        }
+        assert!(row["cpu_percent"].is_f64(), "{what}: CPU use from /proc");
+    }
+    // cyclictest beside every rate when it is installed, else a note saying why not.
+    if cyclictest::locate().is_some() {
+        let ct = j["cyclictest"].as_array().unwrap();
+        assert_eq!(ct.len(), QUICK_RATES.len(), "{}", j["cyclictest_note"]);
+        for c in ct {
+            quantiles_ok(&c["latency"], "cyclictest");
+        }
+        for row in stress {
+            assert!(row["lateness_over_cyclictest"]["p50"].is_f64(), "{row}");
+        }
+    } else {
+        assert!(j["cyclictest_note"].is_string());
+    }
+
+    // Plots: every one listed exists as a PNG of the suite's size, lateness and error per rate.
+    let listed: BTreeSet<String> = j["plots"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_str().unwrap().to_string())
+        .collect();
+    let mut expected: BTreeSet<String> = QUICK_RATES
+        .iter()
+        .flat_map(|r| [format!("lateness-{r}hz.png"), format!("error-{r}hz.png")])
+        .collect();
+    expected.insert("error-all-rates.png".into());
+    assert_eq!(listed, expected);
+    for p in &listed {
+        assert_eq!(png_size(&out.join(p)), (plots::WIDTH, plots::HEIGHT), "{p}");
+    }
+
+    // Markdown: the three per-run tables, each with a row per rate and state count.
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let tables = table_rows(&md);
+    assert_eq!(tables.len(), 3, "lateness, end to end, thesis:\n{md}");
+    let want: Vec<(String, String)> = QUICK_RATES
+        .iter()
+        .flat_map(|r| STATES.iter().map(move |s| (r.to_string(), s.to_string())))
+        .collect();
+    for t in &tables {
+        assert_eq!(t, &want, "{md}");
+    }
+    assert!(
+        md.contains("| raw-busy |") && md.contains("| raw-event |"),
+        "{md}"
+    );
+    // The Markdown is also what the command prints.
+    assert_eq!(String::from_utf8_lossy(&run.stdout).trim(), md.trim());
+    let _ = std::fs::remove_dir_all(&out);
+}
