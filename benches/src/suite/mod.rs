@@ -348,13 +348,7 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
         )?;
         plots_written.push(name);
         let name = format!("error-{rate}hz.png");
-        let curves: Vec<Curve<'_>> = traces
-            .iter()
-            .map(|(l, p)| Curve {
-                label: l,
-                points: p,
-            })
-            .collect();
+        let curves = labelled_curves(&traces);
         plots::error_png(
             &cfg.out.join(&name),
             &format!("Conductor state error at {rate} Hz (thesis Fig. 3.1)"),
@@ -369,13 +363,7 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
         cyclic_rows.extend(ct_row);
     }
     let name = "error-all-rates.png".to_string();
-    let curves: Vec<Curve<'_>> = fig31
-        .iter()
-        .map(|(l, p)| Curve {
-            label: l,
-            points: p,
-        })
-        .collect();
+    let curves = labelled_curves(&fig31);
     plots::error_png(
         &cfg.out.join(&name),
         &format!(
@@ -514,4 +502,12 @@ fn stress_row(r: &RunResult, ct: Option<&CyclicRow>, event_floor: Option<&Quanti
         thesis_error_rms: num(&r.summary, "err_thesis_rms"),
         pipeline_error_max: num(&r.summary, "err_sample_max"),
     }
+}
+
+/// Borrowed plot curves of `(label, points)` traces.
+fn labelled_curves(traces: &[(String, Vec<(f64, f64)>)]) -> Vec<Curve<'_>> {
+    traces
+        .iter()
+        .map(|(label, points)| Curve { label, points })
+        .collect()
 }

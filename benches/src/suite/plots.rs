@@ -120,6 +120,23 @@ impl Distribution {
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// The legend box of every plot: upper right, on a light background.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()?;
+    Ok(())
+}
+
 /// Registers the font, draws, and names the image in any error.
 fn plot(path: &Path, draw: impl FnOnce() -> DrawResult) -> Result<(), PlotError> {
     let r = if register_font() {
@@ -171,13 +188,7 @@ fn draw_lateness(path: &Path, title: &str, series: &[Distribution]) -> DrawResul
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
         chart.draw_series(p.iter().map(|&xy| Circle::new(xy, 3, c.filled())))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 15))
-        .draw()?;
+    draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
@@ -233,13 +244,7 @@ fn draw_error(path: &Path, title: &str, curves: &[Curve<'_>]) -> DrawResult {
             .label(c.label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 15))
-        .draw()?;
+    draw_legend(&mut chart)?;
     root.present()?;
     Ok(())
 }
