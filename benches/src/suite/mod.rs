@@ -486,6 +486,8 @@ fn stress_row(r: &RunResult, ct: Option<&CyclicRow>, event_floor: Option<&Quanti
         pinned_cpu: r.pinned_cpu,
         ticks: r.ticks,
         misses: r.misses,
+        misses_by_second: r.misses_by_second.clone(),
+        misses_by_half: r.misses_by_half(),
         achieved_hz: r.achieved_hz(),
         cpu_percent: r.cpu_percent,
         lateness,

@@ -152,6 +152,11 @@ pub struct StressRow {
     pub ticks: u64,
     /// Deadlines missed (slots skipped) in the window.
     pub misses: u64,
+    /// The same per one-second slice of the window: misses over time.
+    pub misses_by_second: Vec<u64>,
+    /// Misses in the first and the second half of those slices: about equal when misses do
+    /// not grow over time.
+    pub misses_by_half: (u64, u64),
     /// Ticks per second.
     pub achieved_hz: f64,
     /// CPU time of the executor process, % of one CPU.
@@ -305,7 +310,7 @@ impl Report {
         }
         let _ = writeln!(
             s,
-            "| rate Hz | states | RT | ticks | misses | p50 | p99 | p99.9 | max | cyclictest p50 | p99 | p99.9 | max | ×p50 | ×p99 | ×p99.9 | ×max |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "| rate Hz | states | RT | ticks | misses | 1st / 2nd half | p50 | p99 | p99.9 | max | cyclictest p50 | p99 | p99.9 | max | ×p50 | ×p99 | ×p99.9 | ×max |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for r in &self.stress {
             let ct = self
@@ -316,12 +321,14 @@ impl Report {
             let x = r.lateness_over_cyclictest.unwrap_or_default();
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} / {} | {} | {} | {} | {} | {} | {} |",
                 rate(r.rate_hz),
                 r.states,
                 if r.rt_active { "FIFO" } else { "no" },
                 r.ticks,
                 r.misses,
+                r.misses_by_half.0,
+                r.misses_by_half.1,
                 q4(&r.lateness),
                 ct,
                 ratio(x.p50),

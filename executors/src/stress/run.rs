@@ -111,6 +111,9 @@ pub struct RunResult {
     pub ticks: u64,
     /// Deadlines missed (slots skipped) in the window.
     pub misses: u64,
+    /// The same, in successive one-second slices of the window (the last may be shorter); they
+    /// sum to `misses`.
+    pub misses_by_second: Vec<u64>,
     /// Tick lateness (wake-up time − deadline) of the window's ticks. Its max is exact when the
     /// window set the run's record, else the upper bound of its bucket (≤ 12.5 % over).
     pub lateness: Histogram,
@@ -130,6 +133,12 @@ pub struct RunResult {
 }
 
 impl RunResult {
+    /// Misses in the first and in the second half of the window's one-second slices (an odd
+    /// middle slice counts in neither): equal within noise when misses do not grow over time.
+    pub fn misses_by_half(&self) -> (u64, u64) {
+        halves(&self.misses_by_second)
+    }
+
     /// Ticks per second over the window.
     pub fn achieved_hz(&self) -> f64 {
         if self.window_ns == 0 {
@@ -143,10 +152,12 @@ impl RunResult {
     pub fn executor_line(&self) -> String {
         let h = &self.lateness;
         format!(
-            "executor: ticks={} misses={} rt={} cpu={} cpu_percent={} lateness_p50_us={:.1} \
+            "executor: ticks={} misses={} misses_by_half={}/{} rt={} cpu={} cpu_percent={} lateness_p50_us={:.1} \
              lateness_p99_us={:.1} lateness_p999_us={:.1} lateness_max_us={:.1} achieved_hz={:.1}",
             self.ticks,
             self.misses,
+            self.misses_by_half().0,
+            self.misses_by_half().1,
             u8::from(self.rt_active),
             self.pinned_cpu.map_or(-1, |c| c as i64),
             self.cpu_percent
@@ -158,6 +169,12 @@ impl RunResult {
             self.achieved_hz()
         )
     }
+}
+
+/// Sums of the first and the second half of `v`, its middle element (odd length) left out.
+fn halves(v: &[u64]) -> (u64, u64) {
+    let h = v.len() / 2;
+    (v[..h].iter().sum(), v[v.len() - h..].iter().sum())
 }
 
 /// CPU time (ns) used so far by every thread of process `pid`: the sum of the first field of
@@ -364,8 +381,22 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
     let a = stats(&mut stats_sub, 0, Duration::from_secs(2))?;
     let cpu_a = pid.and_then(|p| process_cpu_ns(p).ok());
     let wall_a = monotonic_ns();
-    std::thread::sleep(Duration::from_secs_f64(opts.seconds));
-    let b = stats(&mut stats_sub, a.seq, Duration::from_secs(2))?;
+    // Stats once a second through the window, so misses can be seen over time: a schedule that
+    // drifts or a queue that fills shows as misses growing from slice to slice.
+    let window = Duration::from_secs_f64(opts.seconds);
+    let opened = Instant::now();
+    let mut b = a;
+    let mut misses_by_second = Vec::with_capacity(opts.seconds.ceil() as usize + 1);
+    loop {
+        let left = window.saturating_sub(opened.elapsed());
+        if left.is_zero() {
+            break;
+        }
+        std::thread::sleep(left.min(Duration::from_secs(1)));
+        let s = stats(&mut stats_sub, b.seq, Duration::from_secs(2))?;
+        misses_by_second.push(s.misses - b.misses);
+        b = s;
+    }
     let cpu_b = pid.and_then(|p| process_cpu_ns(p).ok());
     let wall_b = monotonic_ns();
 
@@ -415,6 +446,7 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
         pinned_cpu: usize::try_from(b.cpu).ok(),
         ticks: b.ticks - a.ticks,
         misses: b.misses - a.misses,
+        misses_by_second,
         lateness: window_lateness(&a, &b),
         window_ns: b.t_ns.saturating_sub(a.t_ns),
         cpu_percent,
@@ -466,6 +498,14 @@ mod tests {
         }
         let b = process_cpu_ns(me).unwrap();
         assert!(b > a, "{a} → {b}");
+    }
+
+    #[test]
+    fn halves_leave_out_an_odd_middle() {
+        assert_eq!(halves(&[]), (0, 0));
+        assert_eq!(halves(&[5]), (0, 0));
+        assert_eq!(halves(&[1, 2]), (1, 2));
+        assert_eq!(halves(&[1, 2, 100, 3, 4]), (3, 7));
     }
 
     #[test]

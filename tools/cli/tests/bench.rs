@@ -109,6 +109,18 @@ fn quick_bench_writes_a_table_json_and_plots() {
         for k in ["ticks", "misses", "samples", "lost", "late_steps"] {
             assert!(row[k].is_u64(), "{what}: {k} = {}", row[k]);
         }
+        // Misses over time: one count per second of the window, summing to the total.
+        let by_second: Vec<u64> = row["misses_by_second"]
+            .as_array()
+            .unwrap_or_else(|| panic!("{what}: misses_by_second"))
+            .iter()
+            .map(|m| m.as_u64().unwrap())
+            .collect();
+        assert_eq!(by_second.len(), 3, "{what}: a 3 s window in 1 s slices");
+        assert_eq!(
+            by_second.iter().sum::<u64>(),
+            row["misses"].as_u64().unwrap()
+        );
         for k in ["thesis_error_max", "thesis_error_rms", "pipeline_error_max"] {
             assert!(row[k].is_f64(), "{what}: {k} = {}", row[k]);
         }
