@@ -127,7 +127,7 @@ beside cyclictest's at the same rate, priority and CPU (with ratios), misses, ex
 hardware sample -> external subscriber and controller command -> hardware write latencies, the
 thesis' error sin(t) - value (Fig. 3.1 plots); plus the raw iceoryx2 ping-pong floor. Installs
 rt-tests (cyclictest) with apt-get when it is missing, unless --no-install. A full run takes
-about 6 minutes; --quick about one. Run it on a quiet machine.
+about 5 minutes; --quick about one. Run it on a quiet machine.
 
 Examples:\n  conductor bench\n  conductor bench --quick -o /tmp/bench\n  conductor bench --rates 1000,2000,5000 --states 3 --seconds 5"
     )]
