@@ -131,6 +131,7 @@ fn the_score_board_manifest_is_one_gateway_and_no_executor() {
             lazy_rate_hz: Some(10.0),
             restore: true,
             retry_ms: Some(200),
+            watchdog_ms: Some(200),
         }]
     );
 }

@@ -129,6 +129,9 @@ pub(super) fn gateway_args(g: &GatewayDef, domain: &str) -> Vec<OsString> {
             if let Some(ms) = g.retry_ms {
                 a.extend(["--retry-ms".into(), ms.to_string().into()]);
             }
+            if let Some(ms) = g.watchdog_ms {
+                a.extend(["--watchdog-ms".into(), ms.to_string().into()]);
+            }
             a
         }
     }
@@ -771,6 +774,7 @@ mod tests {
             lazy_rate_hz: None,
             restore: true,
             retry_ms: None,
+            watchdog_ms: None,
         }
     }
 
@@ -796,6 +800,7 @@ mod tests {
             lazy_rate_hz: Some(2.5),
             restore: false,
             retry_ms: Some(50),
+            watchdog_ms: Some(250),
             ..def()
         };
         assert_eq!(
@@ -807,7 +812,9 @@ mod tests {
                 "2.5",
                 "--no-restore",
                 "--retry-ms",
-                "50"
+                "50",
+                "--watchdog-ms",
+                "250"
             ]
         );
     }

@@ -72,6 +72,7 @@ pub const GATEWAY_KEYS: &[&str] = &[
     "lazy_rate_hz",
     "restore",
     "retry_ms",
+    "watchdog_ms",
 ];
 /// Top-level keys.
 pub const TOP_KEYS: &[&str] = &["system", "domain", "subsystems", "gateways"];
@@ -176,6 +177,9 @@ pub struct GatewayDef {
     pub restore: bool,
     /// Pause between reconnection attempts (ms); `None`: the gateway's default.
     pub retry_ms: Option<u64>,
+    /// Command watchdog (ms): no setpoint for this long → the commanded variables go to their
+    /// safe value; `None`: off.
+    pub watchdog_ms: Option<u64>,
 }
 
 /// One executor: a base tick and the components it schedules.

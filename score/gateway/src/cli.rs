@@ -47,6 +47,11 @@ struct Cli {
     /// Milliseconds between reconnection attempts.
     #[arg(long, default_value_t = 200)]
     retry_ms: u64,
+    /// Command watchdog (ms): once a controller has set variables, no command for this long
+    /// sets them to their safe value (0, clamped into their limits) and flags them. Off unless
+    /// given.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=60_000))]
+    watchdog_ms: Option<u64>,
 }
 
 /// Bad arguments (the launcher does not restart a gateway that exits with it).
@@ -118,10 +123,18 @@ where
         lazy_rate_hz: cli.lazy_rate,
         restore: !cli.no_restore,
         retry: Duration::from_millis(cli.retry_ms.max(10)),
+        watchdog: cli.watchdog_ms.map(Duration::from_millis),
         ..Options::default()
     };
     let mut gw = Gateway::new(opts, bus, stop);
-    match gw.run() {
+    let ended = gw.run();
+    let st = gw.stats;
+    eprintln!(
+        "score-gateway: connects={} published={} commands={} rejected={} restores={} \
+         watchdog_trips={}",
+        st.connects, st.published, st.commands, st.rejected, st.restores, st.watchdog_trips
+    );
+    match ended {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("score-gateway: {e}");

@@ -43,6 +43,9 @@ pub struct Options {
     pub retry: Duration,
     /// Interval of clock pings.
     pub ping: Duration,
+    /// Command watchdog: once commands have come, none for this long sets every commanded
+    /// variable to its safe value (0, clamped into its limits) and flags it `WATCHDOG`.
+    pub watchdog: Option<Duration>,
 }
 
 impl Default for Options {
@@ -55,6 +58,7 @@ impl Default for Options {
             restore: true,
             retry: Duration::from_millis(200),
             ping: Duration::from_secs(1),
+            watchdog: None,
         }
     }
 }
@@ -64,6 +68,8 @@ struct VarState {
     meta: StateMeta,
     board_id: Option<u8>,
     status: u32,
+    /// A controller has set it since the watchdog last fired.
+    commanded: bool,
 }
 
 /// Counters for logs and tests.
@@ -79,6 +85,8 @@ pub struct Stats {
     pub rejected: u64,
     /// Configurations replayed onto an empty board.
     pub restores: u64,
+    /// Times the command watchdog fired.
+    pub watchdog_trips: u64,
 }
 
 /// One board on the bus.
@@ -96,6 +104,8 @@ pub struct Gateway {
     tick: u64,
     stop: Arc<AtomicBool>,
     announced: bool,
+    /// When the last setpoint arrived.
+    last_command: Option<Instant>,
     /// Counters.
     pub stats: Stats,
 }
@@ -117,6 +127,7 @@ impl Gateway {
             tick: 0,
             stop,
             announced: false,
+            last_command: None,
             stats: Stats::default(),
         }
     }
@@ -160,6 +171,7 @@ impl Gateway {
                 }
             }
             self.forward_commands(link)?;
+            self.watchdog(link)?;
             if last_ping.elapsed() >= self.opts.ping {
                 self.ping(link)?;
                 last_ping = Instant::now();
@@ -339,6 +351,7 @@ impl Gateway {
                         meta,
                         board_id: None,
                         status: 0,
+                        commanded: false,
                     });
                     grew = true;
                     self.states.len() - 1
@@ -410,34 +423,88 @@ impl Gateway {
                 self.stats.rejected += 1;
                 continue;
             };
-            let generation = self.generation.unwrap_or(0);
-            match link.request(Request::Set {
-                id,
-                value: v,
-                generation,
-            }) {
-                Ok(_) => {
-                    let s = &mut self.states[index as usize];
-                    s.status &= !(status::REJECTED | status::CLAMPED);
-                    if clamped {
-                        s.status |= status::CLAMPED;
-                    }
-                    self.stats.commands += 1;
+            self.last_command = Some(Instant::now());
+            if self.set(link, index as usize, id, v)? {
+                let s = &mut self.states[index as usize];
+                s.status &= !(status::REJECTED | status::CLAMPED | status::WATCHDOG);
+                if clamped {
+                    s.status |= status::CLAMPED;
                 }
-                Err(GatewayError::Board { stale, message }) => {
-                    eprintln!(
-                        "score-gateway: set {} = {v}: {message}",
-                        self.states[index as usize].name
-                    );
-                    self.states[index as usize].status |= status::REJECTED;
-                    self.stats.rejected += 1;
-                    if stale {
-                        self.sync(link)?;
-                    }
-                }
-                Err(e) => return Err(e),
+                s.commanded = true;
+                self.stats.commands += 1;
+            } else {
+                self.states[index as usize].status |= status::REJECTED;
+                self.stats.rejected += 1;
             }
         }
+        Ok(())
+    }
+
+    /// Sets variable `index` (board id `id`) to `value` on the board; `false` when the board
+    /// refuses (it says why on stderr; a stale table is re-read).
+    fn set(
+        &mut self,
+        link: &mut Link,
+        index: usize,
+        id: u8,
+        value: f64,
+    ) -> Result<bool, GatewayError> {
+        let generation = self.generation.unwrap_or(0);
+        match link.request(Request::Set {
+            id,
+            value,
+            generation,
+        }) {
+            Ok(_) => Ok(true),
+            Err(GatewayError::Board { stale, message }) => {
+                eprintln!(
+                    "score-gateway: set {} = {value}: {message}",
+                    self.states[index].name
+                );
+                if stale {
+                    self.sync(link)?;
+                }
+                Ok(false)
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    /// The command watchdog: no setpoint for `opts.watchdog` after some came → every commanded
+    /// variable goes to its safe value, once, until a controller commands again.
+    fn watchdog(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+        let (Some(limit), Some(last)) = (self.opts.watchdog, self.last_command) else {
+            return Ok(());
+        };
+        if last.elapsed() < limit {
+            return Ok(());
+        }
+        self.last_command = None;
+        self.stats.watchdog_trips += 1;
+        let mut names = Vec::new();
+        for i in 0..self.states.len() {
+            let s = &self.states[i];
+            let (true, Some(id)) = (s.commanded, s.board_id) else {
+                continue;
+            };
+            let (safe, _) = s.meta.clamp(0.0);
+            let ok = self.set(link, i, id, safe)?;
+            let s = &mut self.states[i];
+            s.commanded = false;
+            s.status |= status::WATCHDOG;
+            if ok {
+                names.push(format!("{} = {safe}", s.name));
+            }
+        }
+        eprintln!(
+            "score-gateway: no command for {} ms: {}",
+            limit.as_millis(),
+            if names.is_empty() {
+                "nothing to make safe".to_string()
+            } else {
+                names.join(", ")
+            }
+        );
         Ok(())
     }
 }

@@ -1,6 +1,7 @@
 //! score-gateway against the firmware in the emulator: a separate process (this test) sees the
 //! board's ADC on the bus, commands a PWM duty that is measured at the pin, and the gateway
-//! survives the board being unplugged and plugged back (the emulator killed and restarted).
+//! survives the board being unplugged and plugged back (the emulator killed and restarted); its
+//! command watchdog makes a duty safe when the controller stops.
 //!
 //! Needs the firmware ELF (`score-fw build`) and the harness (`npm ci` in
 //! score/firmware/emulator); fails with a message saying how to get them.
@@ -11,7 +12,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc::{channel, Receiver};
 use std::time::{Duration, Instant};
 
-use conductor_bus::{Bus, Controller, Domain, StateSubscriber};
+use conductor_bus::{status, Bus, Controller, Domain, StateSample, StateSubscriber};
 use score_firmware_tools::emulator::{fresh_pty_paths, Emulator};
 use score_firmware_tools::port::Port;
 
@@ -23,10 +24,11 @@ struct Gw {
 }
 
 impl Gw {
-    fn spawn(link: &Path, domain: &Domain) -> Self {
+    fn spawn(link: &Path, domain: &Domain, extra: &[&str]) -> Self {
         let mut child = Command::new(env!("CARGO_BIN_EXE_score-gateway"))
             .arg("--port")
             .arg(link)
+            .args(extra)
             .env("CONDUCTOR_DOMAIN", domain.name())
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
@@ -70,24 +72,48 @@ fn configure(emu: &mut Emulator, lines: &[&str]) {
     }
 }
 
-/// Waits for a sample whose value satisfies `ok`; returns it.
-fn wait_for(sub: &mut StateSubscriber, what: &str, ok: impl Fn(f64) -> bool) -> f64 {
+/// Waits for a sample that satisfies `ok`; returns it.
+fn wait_sample(
+    sub: &mut StateSubscriber,
+    what: &str,
+    ok: impl Fn(&StateSample) -> bool,
+) -> StateSample {
     let end = Instant::now() + WAIT;
     let mut last = None;
     while Instant::now() < end {
         while let Some(s) = sub.receive().unwrap() {
-            last = Some(s.value);
-            if ok(s.value) {
+            if ok(&s) {
                 assert!(
                     s.t_sample_ns <= s.t_publish_ns,
                     "sampled after publishing: {s:?}"
                 );
-                return s.value;
+                return s;
             }
+            last = Some(s);
         }
         std::thread::sleep(Duration::from_millis(2));
     }
     panic!("{what}: no matching sample within {WAIT:?} (last {last:?})");
+}
+
+/// Waits for a sample whose value satisfies `ok`; returns the value.
+fn wait_for(sub: &mut StateSubscriber, what: &str, ok: impl Fn(f64) -> bool) -> f64 {
+    wait_sample(sub, what, |s| ok(s.value)).value
+}
+
+/// Waits until the duty at GPIO `pin` is `duty` (0–1) within one count of 62 500 (1 kHz).
+fn wait_duty(emu: &mut Emulator, pin: u8, duty: f64) {
+    let end = Instant::now() + WAIT;
+    loop {
+        let m = emu.measure_pwm(pin, 4).unwrap();
+        if (m.duty - duty).abs() * 62_500.0 <= 1.0 {
+            return;
+        }
+        assert!(
+            Instant::now() < end,
+            "GPIO {pin} never reached duty {duty} (last {m:?})"
+        );
+    }
 }
 
 /// ADC volts as the board computes them: code · 3.3 / 4095 in f32 (< 1e-6 V of rounding).
@@ -101,7 +127,7 @@ fn adc_on_the_bus_pwm_from_a_controller_and_replug() {
     let mut emu = Emulator::start_at(&term, &link).unwrap_or_else(|e| panic!("{e}"));
     configure(&mut emu, &["adc 0 100", "pwm 4 1000 10"]);
     let domain = Domain::unique("scoregw").unwrap();
-    let gw = Gw::spawn(&link, &domain);
+    let gw = Gw::spawn(&link, &domain, &[]);
     let ready = gw.ready();
     assert_eq!(ready, "ready score-rp2040 3 states");
 
@@ -123,14 +149,7 @@ fn adc_on_the_bus_pwm_from_a_controller_and_replug() {
     let mut ctl = Controller::new(&bus);
     ctl.add_ctrl("score-rp2040/PWM4", 75.0).unwrap();
     assert_eq!(ctl.send_ctrl().unwrap(), 1);
-    let end = Instant::now() + WAIT;
-    loop {
-        let m = emu.measure_pwm(4, 4).unwrap();
-        if (m.duty - 0.75).abs() * 62_500.0 <= 1.0 {
-            break;
-        }
-        assert!(Instant::now() < end, "PWM4 never reached 75 % (last {m:?})");
-    }
+    wait_duty(&mut emu, 4, 0.75);
     let mut pwm4 = StateSubscriber::new(&bus, "score-rp2040/PWM4").unwrap();
     wait_for(&mut pwm4, "PWM4 = 75 %", |x| (x - 75.0).abs() < 1e-3);
     // A read-only state refuses setpoints at the controller already.
@@ -172,4 +191,61 @@ fn adc_on_the_bus_pwm_from_a_controller_and_replug() {
         m.periods == 4 && (m.period_ns.unwrap() - 1e6).abs() < 1.0,
         "PWM4 restored: {m:?}"
     );
+}
+
+/// The command watchdog (1 s): while a controller commands every 50 ms the duty holds and no
+/// sample is flagged; when it stops, the gateway sets the duty to its safe value (0 %, a
+/// constant low pin) and flags the state; a new command clears the flag and re-arms it.
+#[test]
+fn the_watchdog_makes_a_duty_safe_when_the_controller_stops() {
+    let (term, link) = fresh_pty_paths().unwrap();
+    let mut emu = Emulator::start_at(&term, &link).unwrap_or_else(|e| panic!("{e}"));
+    configure(&mut emu, &["pwm 4 1000 10"]);
+    let domain = Domain::unique("scoregw-wd").unwrap();
+    let gw = Gw::spawn(&link, &domain, &["--watchdog-ms", "1000"]);
+    gw.ready();
+    let bus = Bus::open(&domain, "score-gateway-test").unwrap();
+    let mut pwm4 = StateSubscriber::new(&bus, "score-rp2040/PWM4").unwrap();
+    let mut ctl = Controller::new(&bus);
+
+    // Commands every 50 ms for two timeouts and until the pin shows 60 %: the watchdog must not
+    // fire. (The pin is measured while commands go on, so a slow emulator cannot see the
+    // watchdog's 0 % instead.)
+    let start = Instant::now();
+    let mut duty_seen = false;
+    while start.elapsed() < Duration::from_secs(2) || !duty_seen {
+        assert!(start.elapsed() < WAIT, "PWM4 never reached 60 %");
+        ctl.add_ctrl("score-rp2040/PWM4", 60.0).unwrap();
+        assert_eq!(ctl.send_ctrl().unwrap(), 1);
+        std::thread::sleep(Duration::from_millis(50));
+        while let Some(s) = pwm4.receive().unwrap() {
+            assert_eq!(
+                s.status & status::WATCHDOG,
+                0,
+                "fired while commanded: {s:?}"
+            );
+        }
+        if !duty_seen {
+            let m = emu.measure_pwm(4, 4).unwrap();
+            duty_seen = (m.duty - 0.60).abs() * 62_500.0 <= 1.0;
+        }
+    }
+
+    // The controller stops: the duty goes to 0 and the state says why.
+    let s = wait_sample(&mut pwm4, "PWM4 made safe", |s| {
+        s.status & status::WATCHDOG != 0
+    });
+    assert_eq!(s.value, 0.0, "{s:?}");
+    let m = emu.measure_pwm(4, 4).unwrap();
+    assert_eq!(
+        (m.duty, m.period_ns),
+        (0.0, None),
+        "PWM4 after the watchdog: {m:?}"
+    );
+
+    // Commanding again re-arms it and clears the flag.
+    ctl.add_ctrl("score-rp2040/PWM4", 30.0).unwrap();
+    assert_eq!(ctl.send_ctrl().unwrap(), 1);
+    let s = wait_sample(&mut pwm4, "PWM4 = 30 %", |s| (s.value - 30.0).abs() < 1e-3);
+    assert_eq!(s.status & status::WATCHDOG, 0, "{s:?}");
 }

@@ -76,6 +76,12 @@ pub(super) fn gateway(cx: &mut Ctx, name: &At<String>, t: &mut Table) -> Option<
         (10, 60_000),
         "a retry interval in ms from 10 to 60000",
     );
+    let watchdog = t.int(
+        &mut cx.d,
+        "watchdog_ms",
+        (1, 60_000),
+        "a command watchdog timeout in ms from 1 to 60000",
+    );
     t.finish(&mut cx.d, GATEWAY_KEYS);
     // A wrong optional key has its error recorded, which rejects the whole manifest.
     if !name_ok {
@@ -89,5 +95,6 @@ pub(super) fn gateway(cx: &mut Ctx, name: &At<String>, t: &mut Table) -> Option<
         lazy_rate_hz: lazy_rate.map(|r| r.value),
         restore: restore.is_none_or(|r| r.value),
         retry_ms: retry.map(|r| r.value as u64),
+        watchdog_ms: watchdog.map(|w| w.value as u64),
     })
 }
