@@ -127,6 +127,27 @@ pub fn pin_to_cpu(cpu: usize) -> Result<(), RtProblem> {
     }
 }
 
+/// Keeps the calling thread, and the threads it starts, off `cpu`: what the rest of a robot
+/// computer does when its real-time CPU is isolated (the stress test's logger and probe).
+/// Nothing changes when `cpu` is the only CPU the thread may use.
+pub fn avoid_cpu(cpu: usize) -> Result<(), RtProblem> {
+    use nix::sched::{sched_getaffinity, sched_setaffinity, CpuSet};
+    use nix::unistd::Pid;
+    let fail = |e: nix::Error| RtProblem {
+        what: format!("cannot keep off CPU {cpu}: sched_setaffinity failed ({e})"),
+        fix: "check the process's CPU set (taskset, cgroup cpuset)".into(),
+    };
+    let mut set = sched_getaffinity(Pid::from_raw(0)).map_err(fail)?;
+    let others = (0..CpuSet::count())
+        .filter(|&c| c != cpu && set.is_set(c).unwrap_or(false))
+        .count();
+    if others == 0 {
+        return Ok(());
+    }
+    set.unset(cpu).map_err(fail)?;
+    sched_setaffinity(Pid::from_raw(0), &set).map_err(fail)
+}
+
 /// Locks all current and future pages in RAM (so the loop never takes a page fault), when the
 /// memory-lock limit allows it.
 pub fn lock_memory() -> Result<(), RtProblem> {
@@ -230,6 +251,33 @@ pub fn setup(req: RtRequest) -> RtStatus {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn avoid_cpu_leaves_the_cpu_out_of_the_threads_set() {
+        use nix::sched::sched_getaffinity;
+        use nix::unistd::Pid;
+        let cpus = |set: nix::sched::CpuSet| -> Vec<usize> {
+            (0..nix::sched::CpuSet::count())
+                .filter(|&c| set.is_set(c).unwrap())
+                .collect()
+        };
+        // In a thread of its own: affinity is per thread.
+        std::thread::spawn(move || {
+            let before = cpus(sched_getaffinity(Pid::from_raw(0)).unwrap());
+            let first = before[0];
+            avoid_cpu(first).unwrap();
+            let after = cpus(sched_getaffinity(Pid::from_raw(0)).unwrap());
+            if before.len() > 1 {
+                let want: Vec<usize> = before.iter().copied().filter(|&c| c != first).collect();
+                assert_eq!(after, want);
+            } else {
+                assert_eq!(after, before, "the only CPU stays");
+            }
+        })
+        .join()
+        .unwrap();
+    }
+
     use super::*;
 
     #[test]

@@ -349,12 +349,19 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
         log_args.push("--trace".into());
         log_args.push(trace_path.clone().into());
     }
+    // The helpers stay off the executor's CPU, as the rest of a robot computer would with that
+    // CPU isolated: what is measured is the executor, not its neighbours on the same core.
+    let avoid: Vec<OsString> = cfg
+        .cpu
+        .map(|c| vec!["--avoid-cpu".into(), c.to_string().into()])
+        .unwrap_or_default();
+    log_args.extend(avoid.iter().cloned());
     let logger = spawn(&opts.tool, &log_args, "logger")?;
     let probe = if cfg.probe {
         let interval = opts.probe_interval.unwrap_or_else(|| {
             Duration::from_millis(10).max(Duration::from_secs_f64(4.0 / cfg.rate_hz))
         });
-        let args: Vec<OsString> = [
+        let mut args: Vec<OsString> = [
             "probe",
             "--domain",
             domain.name(),
@@ -370,6 +377,7 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
         .iter()
         .map(Into::into)
         .collect();
+        args.extend(avoid);
         Some(spawn(&opts.tool, &args, "probe")?)
     } else {
         None

@@ -88,6 +88,10 @@ pub enum Cmd {
         /// Write the first state's `<t_L ns> <sin(t_L) − value>` per sample here (with --sine).
         #[arg(long)]
         trace: Option<PathBuf>,
+        /// Stay off this CPU (the executor's), as processes do on a robot computer whose
+        /// real-time CPU is isolated.
+        #[arg(long)]
+        avoid_cpu: Option<usize>,
     },
     /// Send setpoints to a loopback state and time them (one `probe=...` line).
     Probe {
@@ -107,6 +111,10 @@ pub enum Cmd {
         /// land at random phases of the executor's tick.
         #[arg(long, default_value_t = 10_000)]
         interval_us: u64,
+        /// Stay off this CPU (the executor's), as processes do on a robot computer whose
+        /// real-time CPU is isolated.
+        #[arg(long)]
+        avoid_cpu: Option<usize>,
     },
 }
 
@@ -137,9 +145,11 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
             sine,
             summary,
             trace,
+            avoid_cpu,
         } => (
             "log",
-            log(&domain, &states, seconds, settle_ms, sine, summary, trace),
+            keep_off(avoid_cpu)
+                .and_then(|()| log(&domain, &states, seconds, settle_ms, sine, summary, trace)),
         ),
         Cmd::Probe {
             domain,
@@ -147,9 +157,11 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
             seconds,
             settle_ms,
             interval_us,
+            avoid_cpu,
         } => (
             "probe",
-            probe(&domain, &state, seconds, settle_ms, interval_us),
+            keep_off(avoid_cpu)
+                .and_then(|()| probe(&domain, &state, seconds, settle_ms, interval_us)),
         ),
         Cmd::Run {
             rate,
@@ -186,6 +198,14 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
             crate::note!("conductor-stress {what}: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+/// `--avoid-cpu`: keeps this helper process off the executor's CPU.
+fn keep_off(cpu: Option<usize>) -> Result<(), String> {
+    match cpu {
+        Some(c) => crate::rt::avoid_cpu(c).map_err(|p| format!("{}; {}", p.what, p.fix)),
+        None => Ok(()),
     }
 }
 
