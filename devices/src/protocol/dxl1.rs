@@ -7,10 +7,9 @@ use conductor_protocols::dynamixel1::{
 };
 
 use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
-use super::register_stage::{Dialect, ReadTxn, Stage};
-use crate::message::{Reply, Request};
+use super::register_stage::{protocol_over_stage, Dialect, ReadTxn, Stage};
+use crate::message::Reply;
 use crate::queue::Bounded;
-use crate::stage::{Protocol, ProtocolCounters, TickCtx};
 
 /// How the stage reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -120,30 +119,13 @@ impl Dialect for Dxl1 {
     }
 }
 
-impl Protocol for Dxl1Protocol {
-    type Word = u8;
-
-    fn encode(&mut self, requests: &[Request], out: &mut Bounded<u8>, ctx: TickCtx) {
-        self.stage.encode(requests, out, ctx);
-    }
-
-    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, _ctx: TickCtx) {
-        self.stage.decode(words, out);
-    }
-
-    fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
-        self.stage.expire(out, ctx);
-    }
-
-    fn counters(&self) -> ProtocolCounters {
-        self.stage.counters()
-    }
-}
+protocol_over_stage!(Dxl1Protocol);
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::message::{Credential, Op, ReplyData};
+    use crate::message::{Credential, Op, ReplyData, Request};
+    use crate::stage::{Protocol, TickCtx};
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
         Request::new(Credential::id(id), op, ctx(tick))

@@ -9,10 +9,10 @@ use conductor_protocols::dynamixel2::{
 use conductor_protocols::scan::ScanStats;
 
 use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
-use super::register_stage::{Dialect, ReadTxn, Stage};
-use crate::message::{Reply, Request};
+use super::register_stage::{protocol_over_stage, Dialect, ReadTxn, Stage};
+use crate::message::Reply;
 use crate::queue::Bounded;
-use crate::stage::{Protocol, ProtocolCounters, TickCtx};
+use crate::stage::Protocol;
 
 /// How the stage reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -193,30 +193,13 @@ impl Dialect for Dxl2 {
     }
 }
 
-impl Protocol for Dxl2Protocol {
-    type Word = u8;
-
-    fn encode(&mut self, requests: &[Request], out: &mut Bounded<u8>, ctx: TickCtx) {
-        self.stage.encode(requests, out, ctx);
-    }
-
-    fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>, _ctx: TickCtx) {
-        self.stage.decode(words, out);
-    }
-
-    fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
-        self.stage.expire(out, ctx);
-    }
-
-    fn counters(&self) -> ProtocolCounters {
-        self.stage.counters()
-    }
-}
+protocol_over_stage!(Dxl2Protocol);
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::message::{Credential, Op, ReplyData};
+    use crate::message::{Credential, Op, ReplyData, Request};
+    use crate::stage::TickCtx;
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
         Request::new(Credential::id(id), op, ctx(tick))

@@ -190,3 +190,44 @@ impl<D: Dialect, const N: usize> Stage<D, N> {
         c
     }
 }
+
+/// `impl Protocol` for a wrapper whose `stage` field is a [`Stage`]: both Dynamixel stages are
+/// the register stage under their own public name.
+macro_rules! protocol_over_stage {
+    ($t:ty) => {
+        impl $crate::stage::Protocol for $t {
+            type Word = u8;
+
+            fn encode(
+                &mut self,
+                requests: &[$crate::message::Request],
+                out: &mut $crate::queue::Bounded<u8>,
+                ctx: $crate::stage::TickCtx,
+            ) {
+                self.stage.encode(requests, out, ctx);
+            }
+
+            fn decode(
+                &mut self,
+                words: &[u8],
+                out: &mut $crate::queue::Bounded<$crate::message::Reply>,
+                _ctx: $crate::stage::TickCtx,
+            ) {
+                self.stage.decode(words, out);
+            }
+
+            fn expire(
+                &mut self,
+                out: &mut $crate::queue::Bounded<$crate::message::Reply>,
+                ctx: $crate::stage::TickCtx,
+            ) {
+                self.stage.expire(out, ctx);
+            }
+
+            fn counters(&self) -> $crate::stage::ProtocolCounters {
+                self.stage.counters()
+            }
+        }
+    };
+}
+pub(crate) use protocol_over_stage;
