@@ -222,7 +222,7 @@ proptest! {
         prop_assert_eq!(Command::decode(&buf[..n - 1], &d), Ok(Command::Transmit(f)));
         let n = Response::Frame { frame: f, timestamp: ts }.encode(&mut buf).unwrap();
         prop_assert!(n <= slcan::MAX_FRAME_LINE);
-        let r = Response::decode(Line { body: &buf[..n - 1], terminator: slcan::CR }).unwrap();
+        let r = Response::decode(Line { body: &buf[..n - 1], terminator: slcan::CR }, true).unwrap();
         prop_assert_eq!(r, Response::Frame { frame: f, timestamp: ts });
     }
 
@@ -275,8 +275,8 @@ proptest! {
         for d in [Dialect::LAWICEL, Dialect::CANABLE] {
             let _ = Command::decode(&bytes, &d);
         }
-        let _ = Response::decode(Line { body: &bytes, terminator: slcan::CR });
-        let _ = Response::decode(Line { body: &bytes, terminator: slcan::BEL });
+        let _ = Response::decode(Line { body: &bytes, terminator: slcan::CR }, true);
+        let _ = Response::decode(Line { body: &bytes, terminator: slcan::BEL }, true);
         if bytes.len() >= 13 {
             let f = |i: usize| f32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
             let r = mit_can::Range { min: f(4), max: f(8) };

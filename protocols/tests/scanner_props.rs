@@ -292,7 +292,7 @@ proptest! {
             }
             stream.extend_from_slice(line);
             let term = *line.last().unwrap();
-            let r = Response::decode(slcan::Line { body: &line[..line.len() - 1], terminator: term }).unwrap();
+            let r = Response::decode(slcan::Line { body: &line[..line.len() - 1], terminator: term }, true).unwrap();
             expected.push(format!("{r:?}"));
         }
         stream.extend_from_slice(&partial);

@@ -45,7 +45,7 @@ fn kernel_examples_encode_and_decode() {
         let got = Response::decode(Line {
             body: text.as_bytes(),
             terminator: CR,
-        })
+        }, true)
         .unwrap();
         assert_eq!(
             got,
@@ -63,7 +63,7 @@ fn longest_line_is_slc_mtu() {
     let r = Response::decode(Line {
         body,
         terminator: CR,
-    })
+    }, true)
     .unwrap();
     let frame = CanFrame::extended(
         0x1111_2222,
@@ -209,6 +209,7 @@ fn acknowledgement_variants_interleaved_with_frames() {
     // CANable: CR for everything, BEL on error. LAWICEL: z/Z after t/T. Kernel extensions e/s.
     let wire = b"\r\r\rt1230\r\rz\rt0018FFFFFFFFFFFFFFFC0A1B\rZ\r\x07F04\rVsome-git-id\rN1234\re1a\rsa057033\r";
     let mut s = HostScanner::<64>::new();
+    s.set_timestamps(true);
     let mut got = Vec::new();
     s.feed(wire, |r| got.push(format!("{r:?}")));
     let enter: CanFrame = mit_can::enter_frame(1).unwrap();
@@ -361,7 +362,7 @@ fn malformed_frames_are_rejected() {
             Response::decode(Line {
                 body: b,
                 terminator: CR
-            })
+            }, true)
             .is_err(),
             "{}",
             String::from_utf8_lossy(b)
@@ -373,4 +374,32 @@ fn malformed_frames_are_rejected() {
         Command::decode(b"t12300001", &Dialect::default()),
         Err(SlcanError::Length)
     );
+}
+
+/// Timestamps are taken only when the host switched them on: otherwise 4 extra hex digits make
+/// the line malformed (counted, skipped), never a timestamp and never a value.
+#[test]
+fn extra_digits_without_timestamps_are_malformed() {
+    let line = b"t0006018A3C7AD838ABCD\r";
+    let mut s = HostScanner::<64>::new();
+    let mut got = Vec::new();
+    s.feed(line, |r| got.push(format!("{r:?}")));
+    assert!(got.is_empty(), "{got:?}");
+    assert_eq!(s.stats().malformed.bytes, line.len() as u64);
+    // The same bytes with timestamps on: a frame and its timestamp.
+    let mut s = HostScanner::<64>::new();
+    s.set_timestamps(true);
+    let mut n = 0;
+    s.feed(line, |r| {
+        assert!(matches!(r, Response::Frame { timestamp: Some(0xABCD), .. }));
+        n += 1;
+    });
+    assert_eq!(n, 1);
+    // And a well-formed frame line without timestamp is a frame either way.
+    let mut s = HostScanner::<64>::new();
+    s.feed(b"t0006018A3C7AD838\r", |r| {
+        assert!(matches!(r, Response::Frame { timestamp: None, .. }));
+        n += 1;
+    });
+    assert_eq!(n, 2);
 }

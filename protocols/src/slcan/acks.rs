@@ -91,6 +91,20 @@ impl<const N: usize> PendingAcks<N> {
         Some(f)
     }
 
+    /// Removes the newest pending command (a command taken back before it was sent).
+    pub fn pop_back(&mut self) -> Option<(CommandKind, u32)> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        Some(self.ring[(self.head + self.len) % N])
+    }
+
+    /// Forgets every pending command.
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
     /// Number of pending commands.
     pub fn len(&self) -> usize {
         self.len

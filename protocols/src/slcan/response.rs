@@ -48,7 +48,10 @@ pub(crate) enum Parsed {
     Text(u8),
 }
 
-pub(crate) fn parse(line: Line<'_>) -> Result<Parsed, SlcanError> {
+/// Parses one adapter line. Received frames may carry a 4-digit timestamp only when
+/// `timestamps` is on (the host sent `Z1`): otherwise extra digits make the line malformed,
+/// never a timestamp.
+pub(crate) fn parse(line: Line<'_>, timestamps: bool) -> Result<Parsed, SlcanError> {
     if line.terminator == BEL {
         return if line.body.is_empty() {
             Ok(Parsed::Error)
@@ -63,7 +66,7 @@ pub(crate) fn parse(line: Line<'_>) -> Result<Parsed, SlcanError> {
     match c {
         b'z' | b'Z' if rest.is_empty() => Ok(Parsed::TxAck(c == b'Z')),
         b't' | b'T' | b'r' | b'R' => {
-            let (f, ts) = parse_frame(body, true)?;
+            let (f, ts) = parse_frame(body, timestamps)?;
             Ok(Parsed::Frame(f, ts))
         }
         b'F' => match rest.len() {
@@ -93,9 +96,10 @@ impl Parsed {
 }
 
 impl<'a> Response<'a> {
-    /// Parses one line as the host does.
-    pub fn decode(line: Line<'a>) -> Result<Self, SlcanError> {
-        Ok(parse(line)?.resolve(line.body))
+    /// Parses one line as the host does; frame timestamps are accepted only with
+    /// `timestamps` (the host enabled them with `Z1`).
+    pub fn decode(line: Line<'a>, timestamps: bool) -> Result<Self, SlcanError> {
+        Ok(parse(line, timestamps)?.resolve(line.body))
     }
 
     /// Writes the response with its terminator (adapter/simulator side); returns the length.

@@ -175,6 +175,7 @@ impl<const N: usize> LineScanner<N> {
 /// ```
 pub struct HostScanner<const N: usize = 64> {
     lines: LineScanner<N>,
+    timestamps: bool,
 }
 
 impl<const N: usize> Default for HostScanner<N> {
@@ -184,11 +185,18 @@ impl<const N: usize> Default for HostScanner<N> {
 }
 
 impl<const N: usize> HostScanner<N> {
-    /// An empty scanner.
+    /// An empty scanner. Received frames with a timestamp are malformed until
+    /// [`set_timestamps`](Self::set_timestamps) says the adapter was told to send them.
     pub fn new() -> Self {
         Self {
             lines: LineScanner::new(),
+            timestamps: false,
         }
+    }
+
+    /// Whether received frames carry a timestamp (the host sent `Z1`).
+    pub fn set_timestamps(&mut self, on: bool) {
+        self.timestamps = on;
     }
 
     /// See [`LineScanner::push`].
@@ -209,7 +217,7 @@ impl<const N: usize> HostScanner<N> {
                 body: &self.lines.win.buf()[r.clone()],
                 terminator: term,
             };
-            match parse(line) {
+            match parse(line, self.timestamps) {
                 Ok(p) => break (r, p),
                 Err(SlcanError::Bel) => {
                     // Text before a BEL is malformed; the BEL itself is the error reply.
