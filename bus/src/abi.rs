@@ -9,7 +9,7 @@ use iceoryx2::prelude::ZeroCopySend;
 
 /// Version of the payload layouts in this module. Bumped on any layout change; it is part of every
 /// type name and of the `conductor.abi` service attribute.
-pub const ABI_VERSION: u32 = 1;
+pub const ABI_VERSION: u32 = 2;
 
 /// Maximum number of setpoints one [`CommandFrame`] carries (a 41-DOF humanoid fits in one frame).
 pub const MAX_SETPOINTS: usize = 64;
@@ -23,7 +23,8 @@ pub mod status {
     pub const STALE: u32 = 1 << 0;
     /// The last command applied to this state was clamped to its limits.
     pub const CLAMPED: u32 = 1 << 1;
-    /// The last command for this state was rejected (NaN/inf, read-only state).
+    /// The last command for this state was rejected (NaN/inf, read-only state, or its device
+    /// refuses setpoints: see `DISABLED` and `TRIPPED`).
     pub const REJECTED: u32 = 1 << 2;
     /// The command watchdog fired: the device is in its declared safe action.
     pub const WATCHDOG: u32 = 1 << 3;
@@ -33,10 +34,17 @@ pub mod status {
     pub const REPLAYED: u32 = 1 << 5;
     /// The executor runs on simulated hardware.
     pub const SIMULATED: u32 = 1 << 6;
+    /// The device is not driving its actuator (torque off, out of motor mode, idle, being
+    /// brought up): setpoints are refused (except by a `startup = "hold_off"` device before its
+    /// first command).
+    pub const DISABLED: u32 = 1 << 7;
+    /// A watchdog trip or a fault took the device to its safe state: setpoints are refused until
+    /// its `enable` state is set to 1.
+    pub const TRIPPED: u32 = 1 << 8;
 
     /// Human-readable names of the flags set in `status`, in bit order.
     pub fn names(status: u32) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 7] = [
+        const NAMES: [&str; 9] = [
             "stale",
             "clamped",
             "rejected",
@@ -44,6 +52,8 @@ pub mod status {
             "device-fault",
             "replayed",
             "simulated",
+            "disabled",
+            "tripped",
         ];
         NAMES
             .iter()
@@ -58,7 +68,7 @@ pub mod status {
 /// Times are `CLOCK_MONOTONIC` nanoseconds. `t_sample_ns` is when the hardware was sampled (the
 /// request time for request/reply buses), `t_publish_ns` when the executor handed it to the bus.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("conductor.StateSample.v1")]
+#[type_name("conductor.StateSample.v2")]
 #[repr(C)]
 pub struct StateSample {
     /// Per-state sample counter, starting at 0 and incremented by one per publish; a gap seen by a
@@ -81,7 +91,7 @@ pub struct StateSample {
 
 /// One setpoint inside a [`CommandFrame`].
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
-#[type_name("conductor.Setpoint.v1")]
+#[type_name("conductor.Setpoint.v2")]
 #[repr(C)]
 pub struct Setpoint {
     /// Index of the target state within its subsystem (the `index` service attribute).
@@ -96,7 +106,7 @@ pub struct Setpoint {
 ///
 /// The executor applies every setpoint of a frame in the same tick (the thesis' `sendCtrl`).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("conductor.CommandFrame.v1")]
+#[type_name("conductor.CommandFrame.v2")]
 #[repr(C)]
 pub struct CommandFrame {
     /// Sender's frame counter.
@@ -153,7 +163,7 @@ impl CommandFrame {
 
 /// Executor health, published on `conductor/<subsystem>/stats` (about 10 times per second).
 #[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
-#[type_name("conductor.ExecutorStats.v1")]
+#[type_name("conductor.ExecutorStats.v2")]
 #[repr(C)]
 pub struct ExecutorStats {
     /// Stats message counter.
@@ -194,6 +204,26 @@ pub struct ExecutorStats {
     pub rt_active: u32,
     /// CPU the RT thread is pinned to, or -1.
     pub cpu: i32,
+    /// Times a bus (serial port, CAN interface, adapter) vanished.
+    pub bus_outages: u64,
+    /// Device fault transitions (a fault raised or changed).
+    pub device_faults: u64,
+    /// Replies that came after their request had been given up (counted, never published).
+    pub late_replies: u64,
+    /// Setpoints refused because their device was disabled or tripped.
+    pub setpoints_refused: u64,
+    /// Devices of the subsystem.
+    pub devices: u32,
+    /// Devices driving (enabled).
+    pub devices_enabled: u32,
+    /// Devices tripped (watchdog or fault), waiting to be enabled again.
+    pub devices_tripped: u32,
+    /// Devices reporting a fault now.
+    pub devices_faulted: u32,
+    /// Buses down now.
+    pub links_down: u32,
+    /// Zero.
+    pub reserved: u32,
     /// Tick lateness histogram (see [`crate::histogram`] for the bucket layout).
     pub histogram: [u64; HISTOGRAM_BUCKETS],
 }
@@ -220,6 +250,16 @@ impl Default for ExecutorStats {
             states: 0,
             rt_active: 0,
             cpu: -1,
+            bus_outages: 0,
+            device_faults: 0,
+            late_replies: 0,
+            setpoints_refused: 0,
+            devices: 0,
+            devices_enabled: 0,
+            devices_tripped: 0,
+            devices_faulted: 0,
+            links_down: 0,
+            reserved: 0,
             histogram: [0; HISTOGRAM_BUCKETS],
         }
     }
@@ -258,8 +298,11 @@ mod tests {
     #[test]
     fn stats_layout() {
         assert_eq!(offset_of!(ExecutorStats, stale_states), 120);
-        assert_eq!(offset_of!(ExecutorStats, histogram), 136);
-        assert_eq!(size_of::<ExecutorStats>(), 136 + 8 * HISTOGRAM_BUCKETS);
+        assert_eq!(offset_of!(ExecutorStats, bus_outages), 136);
+        assert_eq!(offset_of!(ExecutorStats, devices), 168);
+        assert_eq!(offset_of!(ExecutorStats, links_down), 184);
+        assert_eq!(offset_of!(ExecutorStats, histogram), 192);
+        assert_eq!(size_of::<ExecutorStats>(), 192 + 8 * HISTOGRAM_BUCKETS);
     }
 
     #[test]
@@ -297,5 +340,7 @@ mod tests {
     fn status_names() {
         let v: Vec<_> = status::names(status::STALE | status::WATCHDOG).collect();
         assert_eq!(v, ["stale", "watchdog"]);
+        let v: Vec<_> = status::names(status::DISABLED | status::TRIPPED).collect();
+        assert_eq!(v, ["disabled", "tripped"]);
     }
 }

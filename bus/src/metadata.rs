@@ -198,7 +198,7 @@ mod tests {
         let attrs = spec.attributes();
         assert_eq!(attrs.number_of_attributes(), 8);
         assert_eq!(get(attrs, KEY_KIND).as_deref(), Some("state"));
-        assert_eq!(get(attrs, KEY_ABI).as_deref(), Some("1"));
+        assert_eq!(get(attrs, KEY_ABI).as_deref(), Some("2"));
         assert_eq!(StateMeta::from_attributes(attrs), Some(m));
     }
 

@@ -86,7 +86,7 @@ fn wrong_type_service_of_the_same_name() {
     assert!(matches!(err, BusError::WrongServiceType { .. }), "{err:?}");
     assert_eq!(
         err.to_string(),
-        "service \"conductor/leg/imposter\" is not a Conductor state (conductor.StateSample.v1): \
+        "service \"conductor/leg/imposter\" is not a Conductor state (conductor.StateSample.v2): \
          a foreign service with payload type \"u64\""
     );
 }

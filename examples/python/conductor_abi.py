@@ -1,11 +1,13 @@
-"""Conductor bus ABI v1 for Python (ctypes + the official iceoryx2 package)."""
+"""Conductor bus ABI v2 for Python (ctypes + the official iceoryx2 package)."""
 import ctypes
 
-ABI_VERSION = 1
+ABI_VERSION = 2
 MAX_SETPOINTS = 64
 
 # StateSample.status bits
-STALE, CLAMPED, REJECTED, WATCHDOG, DEVICE_FAULT, REPLAYED, SIMULATED = (1 << b for b in range(7))
+STALE, CLAMPED, REJECTED, WATCHDOG, DEVICE_FAULT, REPLAYED, SIMULATED, DISABLED, TRIPPED = (
+    1 << b for b in range(9)
+)
 
 
 class StateSample(ctypes.Structure):
@@ -21,7 +23,7 @@ class StateSample(ctypes.Structure):
 
     @staticmethod
     def type_name() -> str:
-        return "conductor.StateSample.v1"
+        return "conductor.StateSample.v2"
 
 
 class Setpoint(ctypes.Structure):
@@ -43,7 +45,7 @@ class CommandFrame(ctypes.Structure):
 
     @staticmethod
     def type_name() -> str:
-        return "conductor.CommandFrame.v1"
+        return "conductor.CommandFrame.v2"
 
 
 assert ctypes.sizeof(StateSample) == 48 and ctypes.sizeof(CommandFrame) == 1048
