@@ -101,7 +101,7 @@ impl Cycle {
             now_ns: self.ctx().now_ns + PERIOD_NS / 2,
         };
         self.replies.clear();
-        self.proto.decode(wire, &mut self.replies, ctx);
+        self.proto.decode(wire, &[], &mut self.replies, ctx);
         self.proto.expire(&mut self.replies, ctx);
         let mut values = 0;
         for r in self.replies.as_slice() {

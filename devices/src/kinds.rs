@@ -11,10 +11,12 @@ use conductor_protocols::can::CanFrame;
 use conductor_protocols::slcan::{Bitrate, Dialect};
 
 use crate::device::{
-    Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX, MitMotor, OdriveAxis, OdriveMode,
+    x_models, Dxl1Model, DxlXConfig, DxlXSetup, Dynamixel1, DynamixelX, MitMotor, OdriveAxis,
+    OdriveMode,
 };
 use crate::hw::{
-    SerialHardware, SerialOptions, SlcanHardware, SlcanOptions, SocketCanHardware, UdpHardware,
+    interface_up, SerialHardware, SerialOptions, SlcanHardware, SlcanOptions, SocketCanHardware,
+    UdpHardware,
 };
 use crate::message::Credential;
 use crate::protocol::{
@@ -26,7 +28,8 @@ use crate::sim::dxl::DxlSimConfig;
 use crate::sim::fault::FaultConfig;
 use crate::sim::hardware::{CanSimHardware, DxlSimHardware};
 use crate::sim::{LoopbackHardware, SimDevice, SimProtocol, SineHardware};
-use crate::stage::{Device, Hardware, Link, LinkOf, Protocol, SafeAction};
+use crate::link::{Link, LinkOf, Opener};
+use crate::stage::{Device, Hardware, Protocol, SafeAction};
 
 /// Which stage a kind belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -114,6 +117,8 @@ pub enum ParamDefault {
     Bool(bool),
     /// String default.
     Str(&'static str),
+    /// Optional: absent means "leave it as the device has it" (a configuration register).
+    Unset,
 }
 
 /// A component kind.
@@ -130,6 +135,8 @@ pub struct KindSpec {
     pub resource: Option<&'static str>,
     /// For devices: the protocol kinds it can sit on.
     pub protocols: &'static [&'static str],
+    /// For devices: the safe actions it can carry out, its declared one first.
+    pub safe_actions: &'static [&'static str],
     /// Parameters.
     pub params: &'static [ParamSpec],
     /// One paragraph for the reference.
@@ -169,6 +176,7 @@ impl Params {
                             ParamDefault::Float(v) => ParamValue::Float(v),
                             ParamDefault::Bool(v) => ParamValue::Bool(v),
                             ParamDefault::Str(v) => ParamValue::Str(v.into()),
+                            ParamDefault::Unset => continue,
                         },
                     );
                 }
@@ -207,6 +215,14 @@ impl Params {
         match self.values.get(name) {
             Some(ParamValue::Str(v)) => Ok(v),
             _ => Err(BuildError::Param(name.into())),
+        }
+    }
+
+    /// Optional integer parameter (`None` when the manifest leaves it unset).
+    pub fn opt_int(&self, name: &str) -> Option<i64> {
+        match self.values.get(name) {
+            Some(ParamValue::Int(v)) => Some(*v),
+            _ => None,
         }
     }
 }
@@ -362,6 +378,36 @@ const MIT_MODEL_NAMES: &[&str] = &[
     "mini-cheetah",
 ];
 
+const X_MODEL_NAMES: &[&str] = &[
+    "xm430-w350",
+    "xm430-w210",
+    "xh430-w350",
+    "xh430-w210",
+    "xh430-v350",
+    "xh430-v210",
+    "xm540-w270",
+    "xm540-w150",
+    "xh540-w270",
+    "xh540-w150",
+    "xh540-v270",
+    "xh540-v150",
+    "any",
+];
+
+/// Safe actions of the register-mapped servos.
+const REGISTER_SAFE: &[&str] = &["hold", "torque_off", "setpoint"];
+
+const fn p_opt(name: &'static str, lo: f64, hi: f64, doc: &'static str) -> ParamSpec {
+    ParamSpec {
+        name,
+        ty: ParamType::Int,
+        default: Some(ParamDefault::Unset),
+        range: Some((lo, hi)),
+        choices: &[],
+        doc,
+    }
+}
+
 const SIM_TIMEOUT: ParamSpec = ParamSpec {
     name: "timeout_us",
     ty: ParamType::Int,
@@ -379,6 +425,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Bytes),
         resource: Some("port"),
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("port", None, &[], "serial device, e.g. /dev/ttyUSB0 or /dev/serial/by-id/usb-FTDI_..."),
             p_int("baud", Some(1_000_000), 1200.0, 12_000_000.0, BAUD_DOC),
@@ -393,6 +440,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Bytes),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("remote", None, &[], "peer address host:port (a serial-over-UDP bridge, conductor-sim --udp)"),
             p_str("local", Some("0.0.0.0:0"), &[], "local address to bind"),
@@ -406,6 +454,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Bytes),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("ids", Some("1,2,3,4,5,6"), &[], "servo IDs on the simulated bus, comma-separated"),
             p_int("baud", Some(1_000_000), 1200.0, 12_000_000.0, BAUD_DOC),
@@ -425,7 +474,11 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Can),
         resource: Some("interface"),
         protocols: &[],
-        params: &[p_str("interface", None, &[], "CAN interface, e.g. can0 (bring it up first: ip link set can0 up type can bitrate 1000000)")],
+        safe_actions: &[],
+        params: &[
+            p_str("interface", None, &[], "CAN interface, e.g. can0 (bring it up first: ip link set can0 up type can bitrate 1000000)"),
+            p_int("bitrate", Some(1_000_000), 10_000.0, 1_000_000.0, "the bitrate the interface was brought up with (bit/s), for the bus-load check"),
+        ],
         doc: "A Linux SocketCAN interface, raw socket, non-blocking.",
     },
     KindSpec {
@@ -434,6 +487,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Can),
         resource: Some("port"),
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("port", None, &[], "serial device of the USB-CAN adapter, e.g. /dev/ttyACM0"),
             p_int("baud", Some(115_200), 1200.0, 12_000_000.0, "serial line speed (ignored by USB CDC adapters)"),
@@ -449,6 +503,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Can),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("mit", Some(""), &[], "MIT-mode motor IDs, comma-separated"),
             p_str("odrive", Some(""), &[], "ODrive node IDs, comma-separated"),
@@ -464,6 +519,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Bytes),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("read", Some("sync"), &["sync", "fast_sync"], "one SYNC READ (a status packet per servo) or one FAST SYNC READ (one combined packet, X430/540 firmware ≥ 45) per transaction; servos reading different spans get a (FAST) BULK READ"),
             RETURN_DELAY_US,
@@ -479,6 +535,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Bytes),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("read", Some("bulk"), &["bulk", "single"], "one BULK READ for all servos (MX series) or one READ per bus window, round robin (AX series)"),
             RETURN_DELAY_US,
@@ -493,6 +550,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Can),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[
             p_str("model", Some("ak80-9"), MIT_MODEL_NAMES, "ranges of the MIT-mode motors"),
             p_str("models", Some(""), &[], "per-motor overrides, e.g. \"1=ak80-9,2=ak10-9\""),
@@ -509,16 +567,30 @@ pub const KINDS: &[KindSpec] = &[
         medium: None,
         resource: None,
         protocols: &["dynamixel2"],
+        safe_actions: REGISTER_SAFE,
         params: &[
             p_int("zero", Some(2048), -1_048_575.0, 1_048_575.0, "raw position meaning 0 rad"),
             p_int("operating_mode", Some(3), 0.0, 16.0, "the servo's Operating Mode (3 position: goals 0..4095; 4/5 extended: ±256 rev)"),
             p_float("current_unit_ma", 2.69, 0.01, 100.0, "Present/Goal Current unit (mA)"),
             p_int("max_current_raw", Some(2047), 1.0, 32767.0, "largest |Present Current| accepted (raw); larger values are treated as damaged"),
             p_float("max_position_rev", 256.0, 1.0, 524_288.0, "largest |Present Position| accepted (revolutions)"),
+            p_str("model", Some("xm430-w350"), X_MODEL_NAMES, "the model the servo must report at bring-up (its model number); \"any\": no check"),
+            p_opt("return_delay_us", 0.0, 508.0, "Return Delay Time written at bring-up (µs, even; EEPROM: written with torque off); match the protocol's return_delay_us"),
+            p_opt("status_return_level", 1.0, 2.0, "Status Return Level written at bring-up (1: reads answered, 2: every instruction)"),
+            p_opt("min_position_limit", 0.0, 4095.0, "Min Position Limit written at bring-up (raw pulses, EEPROM)"),
+            p_opt("max_position_limit", 0.0, 4095.0, "Max Position Limit written at bring-up (raw pulses, EEPROM)"),
+            p_opt("velocity_limit", 0.0, 1023.0, "Velocity Limit written at bring-up (raw, 0.229 rpm, EEPROM)"),
+            p_opt("current_limit", 0.0, 2047.0, "Current Limit written at bring-up (raw, ≈2.69 mA, EEPROM)"),
+            p_opt("profile_velocity", 0.0, 32767.0, "Profile Velocity written at bring-up (raw, 0.229 rpm; 0 = unlimited)"),
+            p_opt("profile_acceleration", 0.0, 32767.0, "Profile Acceleration written at bring-up (raw, 214.577 rev/min²; 0 = unlimited)"),
+            p_bool("reboot_on_fault", false, "after a hardware error (the servo cut its torque), reboot it (back-off 1 s doubling to 30 s), bring it up again and re-enable it where it is"),
         ],
-        doc: "A Dynamixel X-series servo (XM430/XM540/XH430 control table). Channels: position (rad; \
-              reads Present Position, writes Goal Position), velocity (rad/s), current (A), goal_position \
-              (rad), torque_enable, operating_mode, temperature (°C), voltage (V). Safe action: hold.",
+        doc: "A Dynamixel X-series servo (XM430/XM540/XH430/XH540 control table). Channels: position \
+              (rad; reads Present Position, writes Goal Position), velocity (rad/s), current (A), \
+              goal_position (rad), torque_enable, operating_mode, temperature (°C), voltage (V), \
+              hardware_error (Hardware Error Status bits), enable. Brought up by PING (model number \
+              checked), its configuration read and written (EEPROM with torque off) and read back, \
+              Goal Position set to Present Position, then Torque Enable. Safe action: hold.",
     },
     KindSpec {
         stage: Stage::Device,
@@ -526,12 +598,17 @@ pub const KINDS: &[KindSpec] = &[
         medium: None,
         resource: None,
         protocols: &["dynamixel1"],
+        safe_actions: REGISTER_SAFE,
         params: &[
             p_str("model", Some("ax"), &["ax", "mx"], "ax: 1024 steps over 300°; mx: 4096 over 360°"),
             p_int("zero", Some(-1), -1.0, 4095.0, "raw position meaning 0 rad (-1: the middle, 512 or 2048)"),
+            p_opt("return_delay_us", 0.0, 508.0, "Return Delay Time written at bring-up (µs, even)"),
         ],
         doc: "A Dynamixel AX/MX servo on Protocol 1.0. Channels: position (rad), velocity (rad/s), load \
-              (fraction), torque_enable, temperature (°C), voltage (V). Safe action: hold.",
+              (fraction), torque_enable, temperature (°C), voltage (V), enable. Brought up by PING, \
+              its model number read (AX-12A/AX-18A/AX-12W or MX-28/64/106), then Goal Position set to \
+              the present one and Torque Enable. Overload, overheating and input voltage errors are \
+              faults. Safe action: hold.",
     },
     KindSpec {
         stage: Stage::Device,
@@ -539,14 +616,18 @@ pub const KINDS: &[KindSpec] = &[
         medium: None,
         resource: None,
         protocols: &["can_motors"],
+        safe_actions: &["torque_off", "damp", "hold", "setpoint"],
         params: &[
             p_float("kp", 0.0, 0.0, 500.0, "position gain until the kp channel is written"),
             p_float("kd", 0.0, 0.0, 5.0, "velocity gain until the kd channel is written"),
-            p_bool("enable_on_start", false, "enter motor mode on the first tick"),
         ],
         doc: "An MIT-mode motor (Katz firmware, CubeMars AK). Channels: position (rad), velocity (rad/s), \
-              torque (N·m), kp, kd, enable. A tick's writes form one command; the motor only answers \
-              frames, so a sample re-sends the last command. Safe action: torque off (exit motor mode).",
+              torque (N·m), kp, kd (the gains in use), enable, temperature (°C) and fault (code), the \
+              last two from 8-byte replies. A tick's writes form one command; the motor only answers \
+              frames, so a sample re-sends the last command. Brought up by an exit-motor-mode frame \
+              (it must answer), then enter motor mode and a command holding the present position. \
+              Safe action: torque off (exit motor mode); `damp` commands kp = 0 and kd = `safe_value` \
+              (default: the kd parameter).",
     },
     KindSpec {
         stage: Stage::Device,
@@ -554,13 +635,15 @@ pub const KINDS: &[KindSpec] = &[
         medium: None,
         resource: None,
         protocols: &["can_motors"],
+        safe_actions: &["torque_off", "hold", "setpoint"],
         params: &[
             p_str("control_mode", Some("position"), &["position", "velocity", "torque"], "which input the setpoints drive"),
             p_bool("poll", true, "request values with remote frames (false: use the axis's cyclic messages)"),
-            p_bool("enable_on_start", false, "set the controller mode and closed-loop control on the first tick"),
         ],
         doc: "An ODrive axis (CAN Simple, firmware 0.6). Channels: position (rad), velocity (rad/s), \
-              torque (N·m), current (A), state, error, bus_voltage (V), temperature (°C). Safe action: \
+              torque (N·m), current (A), state, error, bus_voltage (V), temperature (°C), enable. \
+              Brought up by a heartbeat request, the controller mode written, the input set to the \
+              present position, then closed-loop control, confirmed by its heartbeat. Safe action: \
               torque off (idle).",
     },
     KindSpec {
@@ -569,6 +652,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Sim),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[
             ParamSpec {
                 name: "amplitude",
@@ -604,6 +688,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Sim),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[ParamSpec {
             name: "tau_s",
             ty: ParamType::Float,
@@ -621,6 +706,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: Some(Medium::Sim),
         resource: None,
         protocols: &[],
+        safe_actions: &[],
         params: &[SIM_TIMEOUT],
         doc: "Protocol of the simulated hardware: one word per request, replies matched by device id.",
     },
@@ -630,6 +716,7 @@ pub const KINDS: &[KindSpec] = &[
         medium: None,
         resource: None,
         protocols: &["sim"],
+        safe_actions: &["hold", "torque_off", "setpoint"],
         params: &[],
         doc: "A device on the simulated bus with one read/write channel, `value`.",
     },
@@ -709,16 +796,24 @@ fn link_bytes<P: Protocol<Word = u8> + 'static>(
     }
     Ok(match hardware {
         "serial" => {
-            let port = hp.str("port")?;
+            let port = hp.str("port")?.to_string();
             let opts = SerialOptions {
                 baud: hardware_baud(hp),
                 low_latency: hp.bool("low_latency")?,
                 exclusive: true,
             };
-            boxed(
-                p,
-                SerialHardware::open(port, &opts).map_err(|e| open_err(port, e))?,
-                cap,
+            let hw = SerialHardware::open(&port, &opts).map_err(|e| open_err(&port, e))?;
+            let (path, again) = (port.clone(), port.clone());
+            let opener = Opener {
+                open: Box::new(move || {
+                    SerialHardware::open(&again, &opts).map_err(|e| e.to_string())
+                }),
+                present: Box::new(move || std::path::Path::new(&path).exists()),
+            };
+            Box::new(
+                LinkOf::new(p, hw, cap.words)
+                    .with_reopen(&port, opener)
+                    .map_err(|e| open_err(&port, e))?,
             )
         }
         "udp" => {
@@ -771,39 +866,68 @@ fn link_can(
     let fill = CanFrame::standard(0, &[]).ok_or_else(|| BuildError::Open("CAN frame".into()))?;
     Ok(match hardware {
         "socketcan" => {
-            let iface = hp.str("interface")?;
-            let hw = SocketCanHardware::open(iface).map_err(|e| open_err(iface, e))?;
-            Box::new(LinkOf::with_fill(p, hw, cap.words, fill))
+            let iface = hp.str("interface")?.to_string();
+            let hw = SocketCanHardware::open(&iface).map_err(|e| open_err(&iface, e))?;
+            let (name, again) = (iface.clone(), iface.clone());
+            let opener = Opener {
+                // A down interface opens but cannot send: wait until it is up.
+                open: Box::new(move || {
+                    if !interface_up(&again) {
+                        return Err(format!("{again} is not up"));
+                    }
+                    SocketCanHardware::open(&again).map_err(|e| e.to_string())
+                }),
+                present: Box::new(move || interface_up(&name)),
+            };
+            Box::new(
+                LinkOf::with_fill(p, hw, cap.words, fill)
+                    .with_reopen(&iface, opener)
+                    .map_err(|e| open_err(&iface, e))?,
+            )
         }
         "slcan" => {
-            let port = hp.str("port")?;
-            let serial = SerialHardware::open(
-                port,
-                &SerialOptions {
-                    baud: hardware_baud(hp),
-                    low_latency: true,
-                    exclusive: true,
-                },
-            )
-            .map_err(|e| open_err(port, e))?;
+            let port = hp.str("port")?.to_string();
             let bitrate = u32::try_from(hp.int("bitrate")?)
                 .ok()
                 .and_then(Bitrate::from_bps)
                 .ok_or_else(|| BuildError::Open("bitrate: not a standard SLCAN rate (10k, 20k, 50k, 100k, 125k, 250k, 500k, 750k/800k, 1M)".into()))?;
             let dialect = match hp.str("dialect")? {
                 "lawicel" => Dialect::LAWICEL,
-                _ => Dialect::CANABLE,
+                "canable" => Dialect::CANABLE,
+                _ => return Err(BuildError::Param("dialect".into())),
             };
-            let hw = SlcanHardware::open(
-                serial,
-                SlcanOptions {
-                    bitrate,
-                    dialect,
-                    ..SlcanOptions::default()
-                },
+            let baud = hardware_baud(hp);
+            let open = move |port: &str| -> Result<SlcanHardware<SerialHardware>, String> {
+                let serial = SerialHardware::open(
+                    port,
+                    &SerialOptions {
+                        baud,
+                        low_latency: true,
+                        exclusive: true,
+                    },
+                )
+                .map_err(|e| e.to_string())?;
+                SlcanHardware::open(
+                    serial,
+                    SlcanOptions {
+                        bitrate,
+                        dialect,
+                        ..SlcanOptions::default()
+                    },
+                )
+                .map_err(|e| e.to_string())
+            };
+            let hw = open(&port).map_err(|e| open_err(&port, e))?;
+            let (path, again) = (port.clone(), port.clone());
+            let opener = Opener {
+                open: Box::new(move || open(&again)),
+                present: Box::new(move || std::path::Path::new(&path).exists()),
+            };
+            Box::new(
+                LinkOf::with_fill(p, hw, cap.words, fill)
+                    .with_reopen(&port, opener)
+                    .map_err(|e| open_err(&port, e))?,
             )
-            .map_err(|e| open_err(port, e))?;
-            Box::new(LinkOf::with_fill(p, hw, cap.words, fill))
         }
         "can_sim" => {
             let limits =
@@ -888,7 +1012,8 @@ pub fn build_link(
         "dynamixel2" => {
             let mode = match pp.str("read")? {
                 "fast_sync" => Dxl2ReadMode::Fast,
-                _ => Dxl2ReadMode::Sync,
+                "sync" => Dxl2ReadMode::Sync,
+                _ => return Err(BuildError::Param("read".into())),
             };
             let p = Dxl2Protocol::new(timing()?, mode, cap.devices, cap.in_flight);
             link_bytes(p, hardware, hp, cap)
@@ -896,7 +1021,8 @@ pub fn build_link(
         "dynamixel1" => {
             let mode = match pp.str("read")? {
                 "single" => Dxl1ReadMode::Single,
-                _ => Dxl1ReadMode::Bulk,
+                "bulk" => Dxl1ReadMode::Bulk,
+                _ => return Err(BuildError::Param("read".into())),
             };
             let p = Dxl1Protocol::new(timing()?, mode, cap.devices, cap.in_flight);
             link_bytes(p, hardware, hp, cap)
@@ -932,46 +1058,54 @@ pub fn build_device(
     let p = params;
     Ok(match kind {
         "sim" => Box::new(SimDevice::new(cred)),
-        "dynamixel_x" => Box::new(DynamixelX::new(
-            cred,
-            DxlXConfig {
+        "dynamixel_x" => {
+            let opt = |k: &str| p.opt_int(k);
+            let models = x_models(p.str("model")?).ok_or_else(|| BuildError::Param("model".into()))?;
+            let cfg = DxlXConfig {
                 zero: p.int("zero")?,
                 operating_mode: p.int("operating_mode")? as u8,
                 current_unit_ma: p.float("current_unit_ma")?,
                 max_current_raw: p.int("max_current_raw")?,
                 max_position_rev: p.float("max_position_rev")?,
-            },
-        )),
+                models,
+                setup: DxlXSetup {
+                    return_delay_us: opt("return_delay_us").map(|v| v as u32),
+                    status_return_level: opt("status_return_level").map(|v| v as u8),
+                    position_limits: (opt("min_position_limit"), opt("max_position_limit")),
+                    velocity_limit: opt("velocity_limit"),
+                    current_limit: opt("current_limit"),
+                    profile: (opt("profile_acceleration"), opt("profile_velocity")),
+                },
+            };
+            Box::new(DynamixelX::new(cred, cfg).reboot_on_fault(p.bool("reboot_on_fault")?))
+        }
         "dynamixel1" => {
             let model = match p.str("model")? {
                 "mx" => Dxl1Model::Mx,
-                _ => Dxl1Model::Ax,
+                "ax" => Dxl1Model::Ax,
+                _ => return Err(BuildError::Param("model".into())),
             };
             let zero = match (p.int("zero")?, model) {
                 (z, _) if z >= 0 => z,
                 (_, Dxl1Model::Ax) => 512,
                 (_, Dxl1Model::Mx) => 2048,
             };
-            Box::new(Dynamixel1::new(cred, model, zero))
+            let delay = p.opt_int("return_delay_us").map(|v| v as u32);
+            Box::new(Dynamixel1::with_return_delay(cred, model, zero, delay))
         }
         "mit_motor" => Box::new(MitMotor::new(
             cred,
             p.float("kp")? as f32,
             p.float("kd")? as f32,
-            p.bool("enable_on_start")?,
         )),
         "odrive_axis" => {
             let mode = match p.str("control_mode")? {
+                "position" => OdriveMode::Position,
                 "velocity" => OdriveMode::Velocity,
                 "torque" => OdriveMode::Torque,
-                _ => OdriveMode::Position,
+                _ => return Err(BuildError::Param("control_mode".into())),
             };
-            Box::new(OdriveAxis::new(
-                cred,
-                mode,
-                p.bool("poll")?,
-                p.bool("enable_on_start")?,
-            ))
+            Box::new(OdriveAxis::new(cred, mode, p.bool("poll")?))
         }
         other => {
             return Err(BuildError::UnknownKind {

@@ -23,12 +23,15 @@
 //! | [`device`] | devices: Dynamixel X-series, Dynamixel 1.0 (AX/MX), MIT-mode motor, ODrive axis |
 //! | [`sim`] | simulators speaking the real wire protocols, fault injection, pty/UDP runners |
 //! | [`kinds`] | the manifest kinds, their parameters, and the factories |
+//! | [`lifecycle`] | bring-up, enable, trips, faults and safe-action confirmation of a device |
 
 #![warn(missing_docs)]
 
 pub mod device;
 pub mod hw;
 pub mod kinds;
+pub mod lifecycle;
+mod link;
 mod message;
 mod outstanding;
 pub mod protocol;
@@ -39,7 +42,10 @@ mod stage;
 pub use message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 pub use outstanding::{Outstanding, Pending};
 pub use queue::{Bounded, Full};
+pub use lifecycle::{DeviceStatus, Failure, Phase, SafeProgress, Startup};
+pub use link::{Link, LinkCounters, LinkOf, LinkState, Opener};
 pub use stage::{
-    Channel, Device, Hardware, HwError, Link, LinkOf, Protocol, ProtocolCounters, SafeAction,
+    Channel, Device, Hardware, HwCounters, HwError, Protocol, ProtocolCounters, SafeAction,
     TickCtx,
 };
+pub use nix::errno::Errno;

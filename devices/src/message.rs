@@ -67,6 +67,12 @@ pub enum Op {
     MitSpecial(MitSpecial),
     /// An ODrive CAN Simple message (encoded by the protocol stage).
     Odrive(conductor_protocols::odrive_can::Message),
+    /// Register buses: is the device there, and which model is it (answered by
+    /// [`ReplyData::Ping`]).
+    Ping,
+    /// Register buses: restart the device (clears a latched hardware error; answered by
+    /// [`ReplyData::Ack`] where the device's status return level allows).
+    Reboot,
     /// Simulated hardware: report the channel's value.
     Sample,
     /// Simulated hardware: set the channel's value.
@@ -121,9 +127,21 @@ pub enum ReplyData {
         v: f32,
         /// Torque (N·m).
         t: f32,
+        /// Motor temperature (°C), in the 8-byte replies of newer firmware.
+        temperature: Option<u8>,
     },
     /// An ODrive message from the node.
     Odrive(conductor_protocols::odrive_can::Message),
+    /// The answer to [`Op::Ping`]: the model number and firmware version where the protocol's
+    /// ping carries them (Dynamixel 2.0), else `None` (Dynamixel 1.0).
+    Ping {
+        /// Model number.
+        model: Option<u16>,
+        /// Firmware version.
+        firmware: Option<u8>,
+    },
+    /// The device acknowledged an instruction that returns no data ([`Op::Reboot`]).
+    Ack,
     /// A simulated channel's value.
     Value(f64),
     /// The device answered with an error (Dynamixel error byte / alert, ODrive error).
@@ -145,6 +163,8 @@ pub struct Reply {
     pub cred: Credential,
     /// The answer.
     pub data: ReplyData,
+    /// The request this answers; `None` for messages nobody asked for (cyclic ODrive messages).
+    pub op: Option<Op>,
     /// Tick of the request this answers.
     pub tick: u64,
     /// Sample time: the request time for request/reply buses.
@@ -176,6 +196,39 @@ impl Update {
             fault,
             tick: reply.tick,
             t_sample_ns: reply.t_sample_ns,
+        }
+    }
+}
+
+impl Reply {
+    /// The answer `data` to request `op` of the device at `cred`, sampled at `t_sample_ns`
+    /// on tick `tick`.
+    pub fn answer(cred: Credential, op: Op, data: ReplyData, tick: u64, t_sample_ns: u64) -> Self {
+        Self {
+            cred,
+            data,
+            op: Some(op),
+            tick,
+            t_sample_ns,
+        }
+    }
+
+    /// `op` of the device at `cred` went unanswered.
+    pub fn missing(cred: Credential, op: Op, tick: u64, t_sample_ns: u64) -> Self {
+        Self::answer(cred, op, ReplyData::Missing { op }, tick, t_sample_ns)
+    }
+}
+
+impl Update {
+    /// A value of `channel` known by the device itself (a commanded gain, its enable state),
+    /// reported at `ctx`.
+    pub fn local(channel: usize, value: f64, ctx: TickCtx) -> Self {
+        Self {
+            channel,
+            value: Some(value),
+            fault: false,
+            tick: ctx.tick,
+            t_sample_ns: ctx.now_ns,
         }
     }
 }

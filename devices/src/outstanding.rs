@@ -1,4 +1,6 @@
-//! Requests awaiting replies, so a protocol can report the ones that never come.
+//! Requests awaiting replies, so a protocol can report the ones that never come, match each
+//! reply to the request that caused it (never to one sent after the reply arrived), and tell a
+//! late reply from a stranger's frame.
 
 use crate::message::{Credential, Op, Reply, ReplyData, Request};
 use crate::queue::Bounded;
@@ -16,35 +18,35 @@ pub struct Pending {
     pub t_request_ns: u64,
     /// When to give up (CLOCK_MONOTONIC ns).
     pub deadline_ns: u64,
+    /// Stream position just after its words: a reply that arrived below it predates it.
+    pub end_pos: u64,
 }
 
 impl Pending {
-    /// Request `r`, given up at `deadline_ns`.
-    pub fn new(r: &Request, deadline_ns: u64) -> Self {
+    /// Request `r`, whose words end at stream position `end_pos`, given up at `deadline_ns`.
+    pub fn new(r: &Request, deadline_ns: u64, end_pos: u64) -> Self {
         Self {
             cred: r.cred,
             op: r.op,
             tick: r.tick,
             t_request_ns: r.t_request_ns,
             deadline_ns,
+            end_pos,
         }
     }
 
     /// The reply that answers this request with `data` (sampled when it was asked).
     pub fn reply(&self, data: ReplyData) -> Reply {
-        Reply {
-            cred: self.cred,
-            data,
-            tick: self.tick,
-            t_sample_ns: self.t_request_ns,
-        }
+        Reply::answer(self.cred, self.op, data, self.tick, self.t_request_ns)
     }
 }
 
-/// Fixed-capacity table of requests in flight.
+/// Fixed-capacity table of requests in flight, and of recently expired ones (whose replies, if
+/// they still come, are late).
 #[derive(Debug, Clone)]
 pub struct Outstanding {
     pending: Bounded<Pending>,
+    expired: Bounded<Pending>,
 }
 
 impl Outstanding {
@@ -52,6 +54,7 @@ impl Outstanding {
     pub fn with_capacity(capacity: usize) -> Self {
         Self {
             pending: Bounded::with_capacity(capacity),
+            expired: Bounded::with_capacity(capacity),
         }
     }
 
@@ -60,29 +63,79 @@ impl Outstanding {
         self.pending.push(p).is_ok()
     }
 
-    /// Removes and returns the oldest pending request from `cred` that `matches`.
-    pub fn resolve(&mut self, cred: Credential, matches: impl Fn(&Op) -> bool) -> Option<Pending> {
+    /// Removes and returns the oldest pending request from `cred` that `matches` and was on the
+    /// bus before the reply arrived (`end_pos <= fence`).
+    pub fn resolve(
+        &mut self,
+        cred: Credential,
+        fence: u64,
+        matches: impl Fn(&Op) -> bool,
+    ) -> Option<Pending> {
         let i = self
             .pending
             .as_slice()
             .iter()
-            .position(|p| p.cred == cred && matches(&p.op))?;
+            .position(|p| p.cred == cred && p.end_pos <= fence && matches(&p.op))?;
         Some(self.pending.remove(i))
     }
 
+    /// A reply nobody pending can take: if it answers a request that expired (or one not yet
+    /// on the bus when it arrived, i.e. an earlier one that expired), it is late. Consumes the
+    /// oldest such expired request; returns whether the reply was late.
+    pub fn resolve_late(&mut self, cred: Credential, matches: impl Fn(&Op) -> bool) -> bool {
+        let i = self
+            .expired
+            .as_slice()
+            .iter()
+            .position(|p| p.cred == cred && matches(&p.op));
+        match i {
+            Some(i) => {
+                self.expired.remove(i);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Forgets the requests whose words lie at or after stream position `from` (never sent);
+    /// returns how many.
+    pub fn forget_from(&mut self, from: u64) -> u64 {
+        let before = self.pending.len();
+        self.pending.retain(|p| p.end_pos <= from);
+        (before - self.pending.len()) as u64
+    }
+
     /// Moves every request past its deadline into `out` as [`ReplyData::Missing`]; returns how
-    /// many expired.
+    /// many expired. Expired requests are remembered (oldest forgotten first) so that their
+    /// late replies are recognised.
     pub fn expire(&mut self, now_ns: u64, out: &mut Bounded<Reply>) -> u64 {
-        let mut expired = 0;
-        self.pending.retain(|p| {
+        let mut n = 0;
+        let Self { pending, expired } = self;
+        pending.retain(|p| {
             if p.deadline_ns > now_ns {
                 return true;
             }
-            expired += 1;
+            n += 1;
             let _ = out.push(p.reply(ReplyData::Missing { op: p.op }));
+            if expired.remaining() == 0 {
+                expired.remove(0);
+            }
+            let _ = expired.push(*p);
             false
         });
-        expired
+        n
+    }
+
+    /// Answers every request in flight with `Missing` and forgets everything (the bus was
+    /// lost); returns how many.
+    pub fn drain_missing(&mut self, out: &mut Bounded<Reply>) -> u64 {
+        let n = self.pending.len() as u64;
+        for p in self.pending.as_slice() {
+            let _ = out.push(p.reply(ReplyData::Missing { op: p.op }));
+        }
+        self.pending.clear();
+        self.expired.clear();
+        n
     }
 
     /// Requests in flight.
@@ -98,6 +151,7 @@ impl Outstanding {
     /// Forgets everything (e.g. after the bus was reset).
     pub fn clear(&mut self) {
         self.pending.clear();
+        self.expired.clear();
     }
 }
 
@@ -112,6 +166,7 @@ mod tests {
             tick,
             t_request_ns: tick * 10,
             deadline_ns: deadline,
+            end_pos: tick,
         }
     }
 
@@ -122,7 +177,7 @@ mod tests {
         assert!(o.track(p(2, 1, 100)));
         assert!(o.track(p(1, 2, 200)));
         assert!(o.track(p(3, 2, 300)));
-        let r = o.resolve(Credential::id(1), |_| true).unwrap();
+        let r = o.resolve(Credential::id(1), u64::MAX, |_| true).unwrap();
         assert_eq!(r.tick, 1, "oldest first");
         assert_eq!(o.len(), 3);
         let mut out = Bounded::with_capacity(8);
@@ -131,9 +186,21 @@ mod tests {
         assert_eq!(expired, [(2, 1), (1, 2)]);
         assert!(matches!(out.as_slice()[0].data, ReplyData::Missing { .. }));
         assert_eq!(o.len(), 1);
-        assert_eq!(o.resolve(Credential::id(3), |_| true).unwrap().tick, 2);
+        assert_eq!(o.resolve(Credential::id(3), u64::MAX, |_| true).unwrap().tick, 2);
         assert!(o.is_empty());
-        assert!(o.resolve(Credential::id(3), |_| true).is_none());
+        assert!(o.resolve(Credential::id(3), u64::MAX, |_| true).is_none());
+        // The expired ones make their late replies recognisable, once each.
+        assert!(o.resolve_late(Credential::id(2), |_| true));
+        assert!(!o.resolve_late(Credential::id(2), |_| true));
+    }
+
+    /// A reply is never matched to a request that was not on the bus before it arrived.
+    #[test]
+    fn the_fence_keeps_a_reply_from_answering_a_later_request() {
+        let mut o = Outstanding::with_capacity(8);
+        assert!(o.track(p(1, 5, 100)));
+        assert!(o.resolve(Credential::id(1), 4, |_| true).is_none());
+        assert_eq!(o.resolve(Credential::id(1), 5, |_| true).unwrap().tick, 5);
     }
 
     #[test]

@@ -60,6 +60,11 @@ impl<T> Bounded<T> {
         self.items.drain(..n);
     }
 
+    /// Removes and returns the newest item.
+    pub fn pop_back(&mut self) -> Option<T> {
+        self.items.pop()
+    }
+
     /// Removes and returns item `i`, shifting later items down (order kept).
     pub fn remove(&mut self, i: usize) -> T {
         self.items.remove(i)

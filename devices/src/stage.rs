@@ -4,6 +4,9 @@
 //! The executor calls every method here on its real-time thread: implementations must not
 //! block, allocate or lock. Buffers are sized when a component is built.
 
+use nix::errno::Errno;
+
+use crate::lifecycle::{DeviceStatus, Startup};
 use crate::message::{Credential, Reply, Request, Update};
 use crate::queue::Bounded;
 
@@ -16,21 +19,43 @@ pub struct TickCtx {
     pub now_ns: u64,
 }
 
-/// Errors a hardware transport reports; each is counted as a bus error by the executor.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+/// Errors a hardware transport reports. They carry the OS's error number, never formatted
+/// text: they are built on the executor's real-time thread, which must not allocate.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum HwError {
-    /// The OS refused the I/O (errno text).
+    /// The OS refused the I/O.
     #[error("I/O error: {0}")]
-    Io(String),
+    Io(#[source] Errno),
     /// The transmit side is full: words were not sent this tick.
     #[error("transmit buffer full ({dropped} words not sent)")]
     TxFull {
         /// Words that did not go out.
         dropped: usize,
     },
-    /// The device vanished (unplugged adapter, closed pty).
-    #[error("device disconnected")]
-    Disconnected,
+    /// The device vanished (unplugged adapter, closed pty, interface removed or down): the
+    /// link closes it and reopens it with back-off.
+    #[error("device disconnected{}", .0.map(|e| format!(" ({})", e.desc())).unwrap_or_default())]
+    Disconnected(Option<Errno>),
+}
+
+/// Counters a hardware keeps about what it absorbed without failing a call.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct HwCounters {
+    /// Frames the adapter refused (SLCAN BEL).
+    pub nacks: u64,
+    /// Frames the adapter never acknowledged within its timeout.
+    pub ack_timeouts: u64,
+    /// Error frames reported by the CAN controller.
+    pub error_frames: u64,
+    /// Bytes from the adapter that were not a valid line or frame.
+    pub discarded: u64,
+}
+
+impl HwCounters {
+    /// What counts as bus errors.
+    pub fn errors(&self) -> u64 {
+        self.nacks + self.ack_timeouts + self.error_frames
+    }
 }
 
 /// Gatekeeper to a physical (or simulated) bus: moves words, never interprets them.
@@ -40,10 +65,29 @@ pub enum HwError {
 pub trait Hardware {
     /// Unit of transfer.
     type Word: Copy;
-    /// Queues `words` for the bus without blocking; returns how many were accepted.
+    /// Queues `words` for the bus without blocking; returns how many were accepted ("taken").
     fn transmit(&mut self, words: &[Self::Word], ctx: TickCtx) -> Result<usize, HwError>;
     /// Copies whatever the bus has delivered (up to `out.len()`) without blocking.
     fn receive(&mut self, out: &mut [Self::Word], ctx: TickCtx) -> Result<usize, HwError>;
+    /// For each word the last [`receive`](Self::receive) returned, how many of the words taken
+    /// so far were not yet known to be on the bus when it arrived (an SLCAN adapter confirms
+    /// each frame with an acknowledgement, interleaved with the frames it receives). A reply
+    /// cannot answer a request that was not on the bus before it: this is the causality fence
+    /// the protocol stage matches replies with. Empty: every word taken counts as sent.
+    fn rx_unconfirmed(&self) -> &[u32] {
+        &[]
+    }
+    /// Urgent words follow (a safe action): drop the words taken but not yet handed to the OS,
+    /// whole words only, and do not hold the next ones back for flow control.
+    fn preempt(&mut self) {}
+    /// Whether every word taken has left (and, where the adapter confirms, been confirmed).
+    fn flushed(&self) -> bool {
+        true
+    }
+    /// Counters of what the hardware absorbed.
+    fn counters(&self) -> HwCounters {
+        HwCounters::default()
+    }
     /// Puts the bus in a quiet state on shutdown (flush, close).
     fn shutdown(&mut self) {}
 }
@@ -69,6 +113,9 @@ pub struct ProtocolCounters {
     pub device_errors: u64,
     /// Requests that could not be encoded (e.g. more than fit in a packet this tick).
     pub dropped_requests: u64,
+    /// Valid replies that came after their request had been given up (counted, never
+    /// delivered: their sample time would be wrong).
+    pub late_replies: u64,
 }
 
 impl ProtocolCounters {
@@ -82,20 +129,44 @@ impl ProtocolCounters {
 
 /// A vendor's packet format: bundles requests into the fewest packets, and scans received words
 /// back into typed replies.
+///
+/// Words are numbered in the order the protocol appends them (its `words_out` counter); a
+/// received word carries a *fence*: the number of appended words known to be on the bus when it
+/// arrived. A reply may only answer a request whose words all lie below its fence.
 pub trait Protocol {
     /// Unit of transfer; must match the hardware's.
     type Word: Copy;
+    /// Words of earlier ticks that the hardware has not taken yet are superseded by this
+    /// tick's (CAN motors re-send their whole command every tick): the link drops them before
+    /// [`encode`](Self::encode) and tells [`discard_unsent`](Self::discard_unsent).
+    const SUPERSEDES_UNSENT: bool = false;
     /// Every request queued since the last protocol tick, in order. Encode them into as few
     /// packets as the protocol allows (one SYNC WRITE for all goal writes, ...), appending the
     /// words to `out`.
     fn encode(&mut self, requests: &[Request], out: &mut Bounded<Self::Word>, ctx: TickCtx);
-    /// Words the hardware received since the last protocol tick; decode into replies.
-    fn decode(&mut self, words: &[Self::Word], out: &mut Bounded<Reply>, ctx: TickCtx);
+    /// Words the hardware received, each with its fence; decode into replies.
+    fn decode(
+        &mut self,
+        words: &[Self::Word],
+        fence: &[u64],
+        out: &mut Bounded<Reply>,
+        ctx: TickCtx,
+    );
     /// Called after `decode` each protocol tick: report requests whose replies are overdue as
     /// [`crate::ReplyData::Missing`] (never invent a value).
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx);
     /// Counters since start.
     fn counters(&self) -> ProtocolCounters;
+    /// The bus was lost: answer every request in flight or queued with `Missing`, forget
+    /// partial packets; the protocol starts afresh when the bus returns.
+    fn reset(&mut self, out: &mut Bounded<Reply>);
+    /// Urgent requests follow (a safe action): drop the queued requests that have not been
+    /// encoded yet (reads are answered `Missing`), so the urgent ones go out first.
+    fn preempt(&mut self);
+    /// The words from stream position `from` on were dropped unsent.
+    fn discard_unsent(&mut self, from: u64) {
+        let _ = from;
+    }
 }
 
 /// One physical quantity a device offers (a state attaches to one channel).
@@ -144,6 +215,11 @@ pub enum SafeAction {
     Hold,
     /// Disable torque / exit motor mode.
     TorqueOff,
+    /// Let the joint move but brake it: zero stiffness, velocity gain `kd` (MIT-mode motors).
+    Damp {
+        /// Velocity gain (N·m·s/rad).
+        kd: f64,
+    },
     /// Command `value` (device units) on `channel`.
     Setpoint {
         /// Channel index.
@@ -154,6 +230,12 @@ pub enum SafeAction {
 }
 
 /// A node on a bus: tags requests with its credential, and interprets replies that carry it.
+///
+/// A device built outside an executor is *unmanaged*: a bare driver whose writes go straight to
+/// the bus (tests, tools). The executor calls [`bring_up`](Self::bring_up) once its bus is open;
+/// from then on the device runs its own lifecycle (probe, configuration, enable from where it
+/// is, trips, faults) and reports it through [`status`](Self::status). Every method runs on the
+/// executor's real-time thread: no allocation, no blocking.
 pub trait Device {
     /// The device's address on its bus.
     fn credential(&self) -> Credential;
@@ -164,110 +246,51 @@ pub trait Device {
     /// Records a setpoint (device units) for `channel`; the request goes out at [`flush`](Self::flush).
     fn write(&mut self, channel: usize, value: f64, ctx: TickCtx);
     /// Called once per device tick after `sample`/`write`: emits the write requests (a device
-    /// may combine several channels into one request, as MIT-mode motors do).
+    /// may combine several channels into one request, as MIT-mode motors do) and the requests of
+    /// its lifecycle.
     fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>);
     /// Interprets a reply addressed to this device, pushing channel updates.
     fn reply(&mut self, reply: &Reply, out: &mut Bounded<Update>);
-    /// Queues the requests that carry out `action`.
+    /// Queues the requests that carry out `action`; a managed device then confirms it on the
+    /// bus (see [`DeviceStatus::safe`]).
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>);
-}
 
-/// A protocol bound to its hardware, with the queues between them: what the executor schedules.
-pub trait Link {
-    /// Protocol tick, downstream: bundle the queued requests into words for the hardware.
-    fn encode(&mut self, requests: &[Request], ctx: TickCtx);
-    /// Hardware tick: send pending words, collect received ones.
-    fn exchange(&mut self, ctx: TickCtx) -> Result<(), HwError>;
-    /// Protocol tick, upstream: decode received words and expire overdue requests.
-    fn decode(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx);
-    /// Protocol counters.
-    fn counters(&self) -> ProtocolCounters;
-    /// Quiets the hardware.
-    fn shutdown(&mut self);
-}
-
-/// [`Link`] over any protocol/hardware pair that share a word type.
-pub struct LinkOf<P: Protocol, H: Hardware<Word = P::Word>> {
-    protocol: P,
-    hardware: H,
-    tx: Bounded<P::Word>,
-    rx: Bounded<P::Word>,
-    rx_buf: Vec<P::Word>,
-}
-
-impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H>
-where
-    P::Word: Default,
-{
-    /// Binds `protocol` to `hardware` with room for `words` words each way per tick.
-    pub fn new(protocol: P, hardware: H, words: usize) -> Self {
-        Self::with_fill(protocol, hardware, words, P::Word::default())
+    /// Where the device is in its lifecycle.
+    fn status(&self) -> DeviceStatus {
+        DeviceStatus::UNMANAGED
+    }
+    /// Starts (or, after its bus came back, restarts) the lifecycle: probe, configure, then
+    /// enable from the present position or stay limp, as `startup` says (a device that was
+    /// driving before its bus was lost resumes driving).
+    fn bring_up(&mut self, startup: Startup, ctx: TickCtx) {
+        let _ = (startup, ctx);
+    }
+    /// Its bus is gone: it sends nothing until [`bring_up`](Self::bring_up) is called again.
+    fn bus_lost(&mut self) {}
+    /// Whether a setpoint for `channel` can take effect now (a disabled or tripped device
+    /// refuses everything but its `enable` channel).
+    fn accepts(&self, channel: usize) -> bool {
+        let _ = channel;
+        true
+    }
+    /// A watchdog trip or a fault: `action`, and every later setpoint refused until the device
+    /// is enabled again (through its `enable` channel).
+    fn trip(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
+        self.safe(action, ctx, out);
+    }
+    /// Values the device knows without asking the bus (its enable state, commanded gains),
+    /// for the channels sampled since the last call.
+    fn report(&mut self, ctx: TickCtx, out: &mut Bounded<Update>) {
+        let _ = (ctx, out);
+    }
+    /// The channels states will sample, once at start-up (a device may pick its read layout
+    /// from them, as Dynamixel X-series servos do with indirect addressing).
+    fn configure_reads(&mut self, sampled: &[usize]) {
+        let _ = sampled;
+    }
+    /// One line for logs: model, read layout, configuration (called off the real-time path).
+    fn describe(&self) -> String {
+        String::new()
     }
 }
 
-impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
-    /// As [`new`](Self::new), for word types without a `Default` (CAN frames): `fill`
-    /// initialises the receive buffer.
-    pub fn with_fill(protocol: P, hardware: H, words: usize, fill: P::Word) -> Self {
-        Self {
-            protocol,
-            hardware,
-            tx: Bounded::with_capacity(words),
-            rx: Bounded::with_capacity(words),
-            rx_buf: vec![fill; words],
-        }
-    }
-
-    /// The protocol (for tests and diagnostics).
-    pub fn protocol(&self) -> &P {
-        &self.protocol
-    }
-
-    /// The hardware (for tests and diagnostics).
-    pub fn hardware(&self) -> &H {
-        &self.hardware
-    }
-}
-
-impl<P: Protocol, H: Hardware<Word = P::Word>> Link for LinkOf<P, H> {
-    fn encode(&mut self, requests: &[Request], ctx: TickCtx) {
-        self.protocol.encode(requests, &mut self.tx, ctx);
-    }
-
-    fn exchange(&mut self, ctx: TickCtx) -> Result<(), HwError> {
-        let mut result = Ok(());
-        if !self.tx.is_empty() {
-            match self.hardware.transmit(self.tx.as_slice(), ctx) {
-                Ok(n) => self.tx.consume(n),
-                Err(e) => {
-                    self.tx.clear();
-                    result = Err(e);
-                }
-            }
-        }
-        let room = self.rx.remaining().min(self.rx_buf.len());
-        if room > 0 {
-            match self.hardware.receive(&mut self.rx_buf[..room], ctx) {
-                Ok(n) => {
-                    self.rx.extend_from_slice(&self.rx_buf[..n]);
-                }
-                Err(e) => result = result.and(Err(e)),
-            }
-        }
-        result
-    }
-
-    fn decode(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
-        self.protocol.decode(self.rx.as_slice(), out, ctx);
-        self.rx.clear();
-        self.protocol.expire(out, ctx);
-    }
-
-    fn counters(&self) -> ProtocolCounters {
-        self.protocol.counters()
-    }
-
-    fn shutdown(&mut self) {
-        self.hardware.shutdown();
-    }
-}

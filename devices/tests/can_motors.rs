@@ -39,6 +39,8 @@ fn tick<H: Hardware<Word = CanFrame>>(
         prep(i, d.as_mut(), ctx, &mut reqs);
         d.flush(ctx, &mut reqs);
     }
+    // What arrived since the last tick, before anything new is sent.
+    link.receive(ctx);
     link.encode(reqs.as_slice(), ctx);
     link.exchange(ctx).unwrap();
     let mut replies = Bounded::<Reply>::with_capacity(64);
@@ -58,7 +60,7 @@ fn tick<H: Hardware<Word = CanFrame>>(
 
 fn mit_devices(ids: &[u32]) -> Vec<Box<dyn Device>> {
     ids.iter()
-        .map(|&id| Box::new(MitMotor::new(Credential::id(id), 20.0, 1.0, true)) as Box<dyn Device>)
+        .map(|&id| Box::new(MitMotor::new(Credential::id(id), 20.0, 1.0)) as Box<dyn Device>)
         .collect()
 }
 
@@ -84,17 +86,20 @@ fn mit_writes_of_a_tick_combine_into_one_command() {
     let mut devs = mit_devices(&[1, 2, 3]);
     let mut seen = 0;
     for k in 0..1000 {
-        let before = link.hardware().frames_from_host();
+        let before = link.hardware().expect("the bus is up").frames_from_host();
         let ups = tick(&mut link, &mut devs, k, |i, d, ctx, q| {
             d.sample(mit_channel::POSITION, ctx, q);
-            if k > 0 {
+            if k == 0 {
+                // These are bare (unmanaged) drivers: enter motor mode through `enable`.
+                d.write(mit_channel::ENABLE, 1.0, ctx);
+            } else {
                 d.write(mit_channel::POSITION, 0.5 * (i as f64 + 1.0), ctx);
                 d.write(mit_channel::KP, 20.0, ctx);
                 d.write(mit_channel::KD, 1.0, ctx);
             }
         });
-        let frames = link.hardware().frames_from_host() - before;
-        // Tick 0 only enters motor mode (the enable of `enable_on_start`); then one command.
+        let frames = link.hardware().expect("the bus is up").frames_from_host() - before;
+        // Tick 0 only enters motor mode; then one command.
         assert_eq!(frames, 3, "tick {k}");
         seen += ups.iter().filter(|(_, u)| u.value.is_some()).count();
         assert!(
@@ -105,8 +110,8 @@ fn mit_writes_of_a_tick_combine_into_one_command() {
     // Replies arrive 0.15 ms after the command, i.e. in the next tick's exchange.
     assert_eq!(seen, 999 * 3);
     let c = link.counters();
-    assert_eq!((c.missing_replies, c.rejected_packets), (0, 0));
-    for s in link.hardware().snapshots() {
+    assert_eq!((c.protocol.missing_replies, c.protocol.rejected_packets), (0, 0));
+    for s in link.hardware().expect("the bus is up").snapshots() {
         let target = 0.5 * s.id as f64;
         // 2 s of a kp = 20, kd = 1 servo on J = 0.01, b = 0.05: settled to the quantisation
         // of the position field (25 rad / 65 535 ≈ 4e-4) plus damping residue.
@@ -135,7 +140,7 @@ fn an_absent_motor_goes_stale_and_is_counted() {
     }
     // Tick k's frame expires 1 ms later, i.e. at tick k + 1: 9 expired in 10 ticks.
     assert_eq!(stale, 9);
-    assert_eq!(link.counters().missing_replies, 9);
+    assert_eq!(link.counters().protocol.missing_replies, 9);
 }
 
 /// The same motors through the SLCAN codec and the adapter simulator (CANable dialect, then
@@ -160,6 +165,9 @@ fn mit_over_slcan() {
             let ups = tick(&mut link, &mut devs, k, |i, d, ctx, q| {
                 d.sample(mit_channel::POSITION, ctx, q);
                 d.sample(mit_channel::VELOCITY, ctx, q);
+                if k == 0 {
+                    d.write(mit_channel::ENABLE, 1.0, ctx);
+                }
                 d.write(mit_channel::POSITION, -0.3 * (i as f64 + 1.0), ctx);
             });
             values += ups.iter().filter(|(_, u)| u.value.is_some()).count();
@@ -167,7 +175,7 @@ fn mit_over_slcan() {
         // The simulated adapter answers at once: replies are decoded in the same tick. Every
         // reply (the 3 enables' included) updates both sampled channels.
         assert_eq!(values, (200 * 3 + 3) * 2, "{dialect:?}");
-        let s = link.hardware().stats();
+        let s = link.hardware().expect("the bus is up").stats();
         assert_eq!(
             s.frames_out,
             200 * 3 + 3,
@@ -178,12 +186,13 @@ fn mit_over_slcan() {
             (s.nacks, s.ack_timeouts, s.stray_acks, s.discarded_bytes),
             (0, 0, 0, 0)
         );
-        let a = link.hardware().port().stats();
+        let a = link.hardware().expect("the adapter is open").port().stats();
         assert_eq!(a.frames_from_host, 603);
         // The open sequence's `C` on a closed channel is refused (BEL), harmlessly.
         assert_eq!(a.nacks, 1);
         for snap in link
             .hardware()
+            .expect("the adapter is open")
             .port()
             .adapter()
             .nodes()
@@ -210,7 +219,6 @@ fn odrive_polled_and_cyclic() {
             Credential::id(3),
             OdriveMode::Position,
             poll,
-            true,
         ))];
         let mut last = None;
         let mut states = Vec::new();
@@ -222,6 +230,10 @@ fn odrive_polled_and_cyclic() {
                 d.sample(odrive_channel::VELOCITY, ctx, q);
                 d.sample(odrive_channel::STATE, ctx, q);
                 assert_eq!(q.len() - before, if poll { 2 } else { 0 });
+                if k == 0 {
+                    // A bare (unmanaged) driver: closed loop through `enable`.
+                    d.write(odrive_channel::ENABLE, 1.0, ctx);
+                }
                 d.write(odrive_channel::POSITION, 2.0, ctx);
             }) {
                 if u.channel == odrive_channel::POSITION {
@@ -232,8 +244,8 @@ fn odrive_polled_and_cyclic() {
                 }
             }
         }
-        let snap = link.hardware().snapshots()[0];
-        assert!(snap.enabled, "closed loop after enable_on_start");
+        let snap = link.hardware().expect("the bus is up").snapshots()[0];
+        assert!(snap.enabled, "closed loop after enable");
         assert!((snap.position - 2.0).abs() < 1e-3, "{snap:?}");
         assert!((last.unwrap() - 2.0).abs() < 0.05, "{last:?}");
         assert!(states.contains(&Some(8.0)), "heartbeat state closed loop");

@@ -26,12 +26,13 @@ fn ops(f: impl FnOnce(&mut Bounded<Request>)) -> Vec<Op> {
 }
 
 fn register(addr: u16, len: u8, value: i64) -> Reply {
-    Reply {
-        cred: Credential::id(1),
-        data: ReplyData::Register { addr, len, value },
-        tick: CTX.tick,
-        t_sample_ns: 500,
-    }
+    Reply::answer(
+        Credential::id(1),
+        Op::Read { addr, len },
+        ReplyData::Register { addr, len, value },
+        CTX.tick,
+        500,
+    )
 }
 
 fn updates(d: &mut impl Device, r: &Reply) -> Vec<Update> {
@@ -46,13 +47,16 @@ fn write(addr: u16, len: u8, value: i64) -> Op {
 
 #[test]
 fn x_series_operating_mode_decides_the_goal_range() {
-    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    let extended = DxlXConfig {
+        operating_mode: 4,
+        ..DxlXConfig::default()
+    };
     // 10 rad = 6519 steps of 2π/4096 from the zero at 2048.
+    let d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
     assert_eq!(d.position_raw(10.0), 4095, "position mode: one turn");
-    d.write(x_channel::OPERATING_MODE, 4.0, CTX);
+    let mut d = DynamixelX::new(Credential::id(1), extended);
     assert_eq!(d.position_raw(10.0), 2048 + 6519, "extended position mode");
-    assert_eq!(ops(|o| d.flush(CTX, o)), [write(11, 1, 4)]);
-    // The servo reports position mode again: the range follows what it reads.
+    // The servo reports position mode: the range follows what it reads.
     let u = updates(&mut d, &register(11, 1, 3));
     assert_eq!(u.len(), 1);
     assert_eq!(
@@ -138,13 +142,13 @@ fn protocol_1_servo_speaks_sign_magnitude_and_its_own_addresses() {
     assert_eq!(
         ops(|o| d.safe(
             SafeAction::Setpoint {
-                channel: dxl1_channel::TORQUE_ENABLE,
+                channel: dxl1_channel::POSITION,
                 value: 0.0
             },
             CTX,
             o
         )),
-        [write(24, 1, 0)]
+        [write(30, 2, 512)]
     );
     // AX positions run 0..=1023 (300°): 1024 is damaged.
     let u = updates(&mut d, &register(36, 2, 1024));

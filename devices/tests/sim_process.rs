@@ -126,6 +126,8 @@ fn drive<D: Device>(
             d.write(channel, goal(i), ctx);
             d.flush(ctx, &mut reqs);
         }
+        // What arrived since the last tick, before anything new is sent.
+        link.receive(ctx);
         link.encode(reqs.as_slice(), ctx);
         link.exchange(ctx).unwrap();
         replies.clear();
@@ -185,15 +187,15 @@ fn dynamixel_process_over_a_pty_at_250_hz() {
     let s = sim.stats();
     let c = link.counters();
     // Nothing is lost on a pty: the simulator saw every packet and byte the stage sent.
-    assert_eq!(num(&s, "packets_in"), c.packets_out, "{s}");
-    assert_eq!(num(&s, "bytes_in"), c.words_out, "{s}");
+    assert_eq!(num(&s, "packets_in"), c.protocol.packets_out, "{s}");
+    assert_eq!(num(&s, "bytes_in"), c.protocol.words_out, "{s}");
     assert_eq!(num(&s, "discarded_in"), 0);
     // One SYNC WRITE and one SYNC READ per bus window.
     assert_eq!(num(&s, "sync_write"), num(&s, "sync_read"));
-    assert_eq!(num(&s, "sync_write") * 2, c.packets_out);
+    assert_eq!(num(&s, "sync_write") * 2, c.protocol.packets_out);
     assert!(num(&s, "sync_write") >= 200, "{s}");
     // Every reply that came is a value; a late one (scheduling) is stale and counted.
-    assert_eq!(c.missing_replies, stale as u64);
+    assert_eq!(c.protocol.missing_replies, stale as u64);
     // Every request was answered or declared missing, except those of the last tick or two
     // (still on the wire, or queued while the bus was busy); late replies on a busy machine are
     // the stale ones.
@@ -220,8 +222,12 @@ fn slcan_process_with_three_mit_motors() {
     let proto = CanMotorProtocol::new(mit_limits("ak80-9").unwrap(), vec![], 0, 3_000_000, 32);
     let mut link = LinkOf::with_fill(proto, hw, 64, CanFrame::standard(0, &[]).unwrap());
     let mut devs: Vec<MitMotor> = (1..=3)
-        .map(|id| MitMotor::new(Credential::id(id), 20.0, 1.0, true))
+        .map(|id| MitMotor::new(Credential::id(id), 20.0, 1.0))
         .collect();
+    // Unmanaged drivers: enter motor mode on the first tick, through the enable channel.
+    for d in &mut devs {
+        d.write(mit_channel::ENABLE, 1.0, TickCtx { tick: 0, now_ns: 0 });
+    }
     let (mut values, mut stale) = (0u64, 0u64);
     let mut total_heartbeats = 0;
     let mut last = [0.0f64; 3];
@@ -249,7 +255,7 @@ fn slcan_process_with_three_mit_motors() {
     assert!((8..=12).contains(&total_heartbeats), "{total_heartbeats}");
     std::thread::sleep(Duration::from_millis(50));
     let s = sim.stats();
-    let hs = link.hardware().stats();
+    let hs = link.hardware().expect("the adapter is open").stats();
     assert_eq!(num(&s, "frames_from_host"), hs.frames_out, "{s}");
     assert_eq!(
         hs.frames_out,
@@ -263,7 +269,7 @@ fn slcan_process_with_three_mit_motors() {
         (3 * 500..=3 * 501).contains(&(values + stale)),
         "{values} + {stale}"
     );
-    assert_eq!(link.counters().missing_replies, stale);
+    assert_eq!(link.counters().protocol.missing_replies, stale);
     assert!(values >= 3 * 250, "{values} values, {stale} stale");
     for (i, v) in last.iter().enumerate() {
         assert!((v - 0.4 * (i as f64 + 1.0)).abs() < 0.01, "{last:?}");
@@ -323,8 +329,8 @@ fn dynamixel_over_udp() {
     std::thread::sleep(Duration::from_millis(50));
     let s = sim.sim().stats();
     let c = link.counters();
-    assert_eq!(s.packets_in, c.packets_out);
-    assert_eq!(s.bytes_in, c.words_out);
+    assert_eq!(s.packets_in, c.protocol.packets_out);
+    assert_eq!(s.bytes_in, c.protocol.words_out);
     assert!(s.fast_sync_read >= 90, "{s:?}");
     // τ = 0: the servos are at the goal (−0.5 rad → 2048 − 326 pulses) exactly.
     let want = (2048 - 326 - 2048) as f64 * 2.0 * std::f64::consts::PI / 4096.0;

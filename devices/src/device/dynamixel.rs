@@ -3,20 +3,44 @@
 
 use std::f64::consts::PI;
 
-use super::register::{ControlTable, Encoding, RegChannel, RegDevice};
+use super::reg_device::RegDevice;
+use super::register::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};
 use crate::message::Credential;
 use crate::stage::SafeAction;
 
 /// X-series control table addresses (XM430, protocols.md §1.9).
 pub mod x_table {
+    /// Model Number (2 bytes).
+    pub const MODEL_NUMBER: u16 = 0;
+    /// Return Delay Time (1 byte, 2 µs, EEPROM).
+    pub const RETURN_DELAY_TIME: u16 = 9;
     /// Operating Mode (1 byte, EEPROM).
     pub const OPERATING_MODE: u16 = 11;
+    /// Current Limit (2 bytes, EEPROM).
+    pub const CURRENT_LIMIT: u16 = 38;
+    /// Velocity Limit (4 bytes, EEPROM).
+    pub const VELOCITY_LIMIT: u16 = 44;
+    /// Max Position Limit (4 bytes, EEPROM).
+    pub const MAX_POSITION_LIMIT: u16 = 48;
+    /// Min Position Limit (4 bytes, EEPROM).
+    pub const MIN_POSITION_LIMIT: u16 = 52;
     /// Torque Enable (1 byte).
     pub const TORQUE_ENABLE: u16 = 64;
+    /// Status Return Level (1 byte).
+    pub const STATUS_RETURN_LEVEL: u16 = 68;
+    /// Hardware Error Status (1 byte): 0 input voltage, 2 overheating, 3 motor encoder,
+    /// 4 electrical shock, 5 overload.
+    pub const HARDWARE_ERROR_STATUS: u16 = 70;
+    /// Goal PWM (2 bytes, signed).
+    pub const GOAL_PWM: u16 = 100;
     /// Goal Current (2 bytes, signed, ≈2.69 mA).
     pub const GOAL_CURRENT: u16 = 102;
     /// Goal Velocity (4 bytes, signed, 0.229 rpm).
     pub const GOAL_VELOCITY: u16 = 104;
+    /// Profile Acceleration (4 bytes).
+    pub const PROFILE_ACCELERATION: u16 = 108;
+    /// Profile Velocity (4 bytes).
+    pub const PROFILE_VELOCITY: u16 = 112;
     /// Goal Position (4 bytes, signed, 4096 per revolution).
     pub const GOAL_POSITION: u16 = 116;
     /// Present Current (2 bytes, signed).
@@ -29,6 +53,41 @@ pub mod x_table {
     pub const PRESENT_INPUT_VOLTAGE: u16 = 144;
     /// Present Temperature (1 byte, °C).
     pub const PRESENT_TEMPERATURE: u16 = 146;
+    /// Indirect Address 1 (2 bytes each, 28 of them).
+    pub const INDIRECT_ADDRESS: u16 = 168;
+    /// Indirect Data 1 (1 byte each).
+    pub const INDIRECT_DATA: u16 = 224;
+}
+
+/// X-series models with this control table (Present Current at 126), by model number as the
+/// servos report it (ROBOTIS e-Manual).
+pub const X_MODELS: &[(u16, &str)] = &[
+    (1000, "xh430-w350"),
+    (1010, "xh430-w210"),
+    (1020, "xm430-w350"),
+    (1030, "xm430-w210"),
+    (1040, "xh430-v350"),
+    (1050, "xh430-v210"),
+    (1100, "xh540-w270"),
+    (1110, "xh540-w150"),
+    (1120, "xm540-w270"),
+    (1130, "xm540-w150"),
+    (1140, "xh540-v270"),
+    (1150, "xh540-v150"),
+];
+
+/// Protocol 1.0 models by family: AX-12A, AX-18A, AX-12W; MX-28, MX-64, MX-106.
+pub const AX_MODELS: &[(u16, &str)] = &[(12, "ax-12a"), (18, "ax-18a"), (300, "ax-12w")];
+/// See [`AX_MODELS`].
+pub const MX_MODELS: &[(u16, &str)] = &[(29, "mx-28"), (310, "mx-64"), (320, "mx-106")];
+
+/// The model list a manifest's `model` names: one model, or `"any"` (no check).
+pub fn x_models(name: &str) -> Option<&'static [(u16, &'static str)]> {
+    if name == "any" {
+        return Some(&[]);
+    }
+    let i = X_MODELS.iter().position(|(_, n)| *n == name)?;
+    Some(&X_MODELS[i..=i])
 }
 
 /// Parameters of an X-series servo.
@@ -45,6 +104,28 @@ pub struct DxlXConfig {
     pub max_current_raw: i64,
     /// Largest |Present Position| in revolutions (multi-turn range, 256 on X series).
     pub max_position_rev: f64,
+    /// Model numbers the servo may report (empty: any).
+    pub models: &'static [(u16, &'static str)],
+    /// Configuration written at bring-up when set (raw register values).
+    pub setup: DxlXSetup,
+}
+
+/// Registers of an X-series servo that bring-up sets when the manifest gives them (`None`:
+/// left as the servo has them). Operating Mode is always set (from [`DxlXConfig`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DxlXSetup {
+    /// Return Delay Time (µs; written in 2 µs units).
+    pub return_delay_us: Option<u32>,
+    /// Status Return Level (1: reads answered; 2: every instruction).
+    pub status_return_level: Option<u8>,
+    /// Min / Max Position Limit (raw pulses).
+    pub position_limits: (Option<i64>, Option<i64>),
+    /// Velocity Limit (raw, 0.229 rpm).
+    pub velocity_limit: Option<i64>,
+    /// Current Limit (raw, ≈2.69 mA).
+    pub current_limit: Option<i64>,
+    /// Profile Acceleration and Profile Velocity (raw).
+    pub profile: (Option<i64>, Option<i64>),
 }
 
 impl Default for DxlXConfig {
@@ -55,6 +136,8 @@ impl Default for DxlXConfig {
             current_unit_ma: 2.69,
             max_current_raw: 2047,
             max_position_rev: 256.0,
+            models: &X_MODELS[2..3],
+            setup: DxlXSetup::default(),
         }
     }
 }
@@ -77,6 +160,10 @@ pub mod x_channel {
     pub const TEMPERATURE: usize = 6;
     /// Present Input Voltage (V).
     pub const VOLTAGE: usize = 7;
+    /// Hardware Error Status (bits).
+    pub const HARDWARE_ERROR: usize = 8;
+    /// 1 while enabled; write 1 to enable from where it is, 0 to switch torque off.
+    pub const ENABLE: usize = 9;
 }
 
 const PULSE_RAD: f64 = 2.0 * PI / 4096.0;
@@ -99,7 +186,69 @@ pub struct XSeries {
 impl ControlTable for XSeries {
     const SAFE_ACTION: SafeAction = SafeAction::Hold;
     const HOLD: Option<usize> = Some(x_channel::POSITION);
-    const TORQUE_OFF: Option<(u16, u8, i64)> = Some((x_table::TORQUE_ENABLE, 1, 0));
+    const TORQUE: u16 = x_table::TORQUE_ENABLE;
+    const PING_MODEL: bool = true;
+    const HW_ERROR: Option<u16> = Some(x_table::HARDWARE_ERROR_STATUS);
+    const REBOOT: bool = true;
+    const INDIRECT: Option<Indirect> = Some(Indirect {
+        addr: x_table::INDIRECT_ADDRESS,
+        data: x_table::INDIRECT_DATA,
+        slots: 28,
+    });
+
+    fn models(&self) -> &'static [(u16, &'static str)] {
+        self.cfg.models
+    }
+
+    fn config(&self) -> Vec<ConfigItem> {
+        use x_table::*;
+        let c = self.cfg.setup;
+        let item = |name, addr, len, value: Option<i64>| {
+            value.map(|value| ConfigItem {
+                name,
+                addr,
+                len,
+                value,
+            })
+        };
+        [
+            item("operating_mode", OPERATING_MODE, 1, Some(self.cfg.operating_mode as i64)),
+            item(
+                "return_delay_us",
+                RETURN_DELAY_TIME,
+                1,
+                c.return_delay_us.map(|us| (us / 2) as i64),
+            ),
+            item("current_limit", CURRENT_LIMIT, 2, c.current_limit),
+            item("velocity_limit", VELOCITY_LIMIT, 4, c.velocity_limit),
+            item("max_position_limit", MAX_POSITION_LIMIT, 4, c.position_limits.1),
+            item("min_position_limit", MIN_POSITION_LIMIT, 4, c.position_limits.0),
+            item(
+                "status_return_level",
+                STATUS_RETURN_LEVEL,
+                1,
+                c.status_return_level.map(i64::from),
+            ),
+            item("profile_acceleration", PROFILE_ACCELERATION, 4, c.profile.0),
+            item("profile_velocity", PROFILE_VELOCITY, 4, c.profile.1),
+        ]
+        .into_iter()
+        .flatten()
+        .collect()
+    }
+
+    fn needs_torque_off(&self, addr: u16) -> bool {
+        addr < x_table::TORQUE_ENABLE || (x_table::INDIRECT_ADDRESS..x_table::INDIRECT_DATA).contains(&addr)
+    }
+
+    fn zero_goal(&self) -> Option<(u16, u8)> {
+        match self.cfg.operating_mode {
+            0 => Some((x_table::GOAL_CURRENT, 2)),
+            1 => Some((x_table::GOAL_VELOCITY, 4)),
+            16 => Some((x_table::GOAL_PWM, 2)),
+            _ => None,
+        }
+    }
 
     fn channels(&self) -> Vec<RegChannel> {
         use x_table::*;
@@ -125,17 +274,17 @@ impl ControlTable for XSeries {
                 .reads(GOAL_POSITION, (-1_048_575, 1_048_575))
                 .writes(GOAL_POSITION, goal)
                 .scaled(PULSE_RAD, cfg.zero),
-            RegChannel::new("torque_enable", "", 1, Unsigned)
-                .reads(TORQUE_ENABLE, (0, 1))
-                .writes(TORQUE_ENABLE, (0, 1)),
-            RegChannel::new("operating_mode", "", 1, Unsigned)
-                .reads(OPERATING_MODE, (0, 16))
-                .writes(OPERATING_MODE, (0, 16)),
+            // Torque and operating mode are read here; bring-up and the `enable` channel set
+            // them (a raw write would bypass enabling from the present position).
+            RegChannel::new("torque_enable", "", 1, Unsigned).reads(TORQUE_ENABLE, (0, 1)),
+            RegChannel::new("operating_mode", "", 1, Unsigned).reads(OPERATING_MODE, (0, 16)),
             RegChannel::new("temperature", "degC", 1, Unsigned)
                 .reads(PRESENT_TEMPERATURE, (0, 150)),
             RegChannel::new("voltage", "V", 2, Unsigned)
                 .reads(PRESENT_INPUT_VOLTAGE, (0, 400))
                 .scaled(0.1, 0),
+            RegChannel::new("hardware_error", "", 1, Unsigned)
+                .reads(HARDWARE_ERROR_STATUS, (0, 255)),
         ]
     }
 
@@ -190,6 +339,8 @@ pub mod dxl1_channel {
     pub const TEMPERATURE: usize = 4;
     /// Present Voltage (42, V).
     pub const VOLTAGE: usize = 5;
+    /// 1 while enabled; write 1 to enable from where it is, 0 to switch torque off.
+    pub const ENABLE: usize = 6;
 }
 
 /// The AX/MX control table on Protocol 1.0: model and the raw position meaning 0 rad.
@@ -197,12 +348,40 @@ pub mod dxl1_channel {
 pub struct Dxl1Series {
     model: Dxl1Model,
     zero: i64,
+    return_delay_us: Option<u32>,
 }
 
 impl ControlTable for Dxl1Series {
     const SAFE_ACTION: SafeAction = SafeAction::Hold;
     const HOLD: Option<usize> = Some(dxl1_channel::POSITION);
-    const TORQUE_OFF: Option<(u16, u8, i64)> = Some((24, 1, 0));
+    const TORQUE: u16 = 24;
+    const PING_MODEL: bool = false;
+    // Input voltage, overheating, overload: reported in every status packet while they last.
+    const FAULT_BITS: u8 = 0x01 | 0x04 | 0x20;
+
+    fn models(&self) -> &'static [(u16, &'static str)] {
+        match self.model {
+            Dxl1Model::Ax => AX_MODELS,
+            Dxl1Model::Mx => MX_MODELS,
+        }
+    }
+
+    fn config(&self) -> Vec<ConfigItem> {
+        self.return_delay_us
+            .map(|us| ConfigItem {
+                name: "return_delay_us",
+                addr: 5,
+                len: 1,
+                value: (us / 2) as i64,
+            })
+            .into_iter()
+            .collect()
+    }
+
+    fn needs_torque_off(&self, _addr: u16) -> bool {
+        // Protocol 1.0 servos take EEPROM writes with torque on.
+        false
+    }
 
     fn channels(&self) -> Vec<RegChannel> {
         use Encoding::{SignMagnitude10, Unsigned};
@@ -224,9 +403,7 @@ impl ControlTable for Dxl1Series {
             RegChannel::new("load", "", 2, SignMagnitude10)
                 .reads(40, (-1023, 1023))
                 .scaled(1.0 / 1023.0, 0),
-            RegChannel::new("torque_enable", "", 1, Unsigned)
-                .reads(24, (0, 1))
-                .writes(24, (0, 1)),
+            RegChannel::new("torque_enable", "", 1, Unsigned).reads(24, (0, 1)),
             RegChannel::new("temperature", "degC", 1, Unsigned).reads(43, (0, 150)),
             RegChannel::new("voltage", "V", 1, Unsigned)
                 .reads(42, (0, 250))
@@ -242,6 +419,25 @@ impl RegDevice<Dxl1Series> {
     /// The servo with ID `cred.id`; `zero` is the raw position meaning 0 rad (512 for AX, 2048
     /// for MX).
     pub fn new(cred: Credential, model: Dxl1Model, zero: i64) -> Self {
-        Self::with_table(cred, Dxl1Series { model, zero })
+        Self::with_table(
+            cred,
+            Dxl1Series {
+                model,
+                zero,
+                return_delay_us: None,
+            },
+        )
+    }
+
+    /// As [`new`](Self::new), writing Return Delay Time at bring-up.
+    pub fn with_return_delay(cred: Credential, model: Dxl1Model, zero: i64, us: Option<u32>) -> Self {
+        Self::with_table(
+            cred,
+            Dxl1Series {
+                model,
+                zero,
+                return_delay_us: us,
+            },
+        )
     }
 }

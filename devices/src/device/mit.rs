@@ -3,10 +3,25 @@
 //! The motor answers every frame it receives with its state and sends nothing unasked, so a
 //! sample needs a frame on the bus. Each device tick sends at most one command: the writes of
 //! the tick (position, velocity, torque, kp, kd) combined into one MIT command; without writes,
-//! a sample re-sends the last command (which also feeds the motor's CAN timeout), or, before
-//! any command, a poll that does not change the motor's mode (exit frame while disabled, enter
-//! frame while enabled).
+//! a sample re-sends the last command (which also feeds the motor's CAN timeout), or, while the
+//! motor is out of motor mode, an exit frame (a poll that does not change its mode).
+//!
+//! Lifecycle (managed by the executor):
+//!
+//! ```text
+//! Probe    exit-motor-mode frame: the reply says it is there, and where
+//! Enable   enter-motor-mode frame, then a command holding the present position with the
+//!          configured gains (entering motor mode never resumes an old target); enabled
+//!          when the motor answers the command
+//! ```
+//!
+//! MIT motors have no model number and no configuration on the bus (their IDs, CAN master ID and
+//! ranges are set in the motor's own menu): bring-up checks that the motor answers. A fault code
+//! (8-byte replies of newer firmware) trips it.
 
+use crate::lifecycle::{
+    DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES, STEP_TRIES,
+};
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
 use crate::stage::{Channel, Device, SafeAction, TickCtx};
@@ -19,21 +34,28 @@ pub mod mit_channel {
     pub const VELOCITY: usize = 1;
     /// Torque (N·m): reply torque, command feed-forward.
     pub const TORQUE: usize = 2;
-    /// Position gain (write-only).
+    /// Position gain: the one in use (reported by the device), settable.
     pub const KP: usize = 3;
-    /// Velocity gain (write-only).
+    /// Velocity gain: the one in use, settable.
     pub const KD: usize = 4;
-    /// 1 enters motor mode, 0 exits (write-only).
+    /// 1 while in motor mode and driving; write 1 to enable from where it is, 0 to exit motor
+    /// mode.
     pub const ENABLE: usize = 5;
+    /// Motor temperature (°C), from 8-byte replies.
+    pub const TEMPERATURE: usize = 6;
+    /// Fault code of the last reply (0 = none; 8-byte replies).
+    pub const FAULT: usize = 7;
 }
 
-const CHANNELS: [Channel; 6] = [
+const CHANNELS: [Channel; 8] = [
     Channel::read_write("position", "rad"),
     Channel::read_write("velocity", "rad/s"),
     Channel::read_write("torque", "N.m"),
-    Channel::write_only("kp", "N.m/rad"),
-    Channel::write_only("kd", "N.m.s/rad"),
-    Channel::write_only("enable", ""),
+    Channel::read_write("kp", "N.m/rad"),
+    Channel::read_write("kd", "N.m.s/rad"),
+    Channel::read_write("enable", ""),
+    Channel::read_only("temperature", "degC"),
+    Channel::read_only("fault", ""),
 ];
 
 /// Command targets.
@@ -46,28 +68,64 @@ struct Target {
     t: f32,
 }
 
+/// Where a lifecycle should end.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Goal {
+    Drive,
+    /// Tripped: hold the position (or damp) with this command, refusing setpoints.
+    Hold,
+    Limp,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    None,
+    Probe,
+    Enable,
+    /// A safe action, waiting for the motor's answer to it.
+    Safe,
+}
+
 /// An MIT-mode motor.
 #[derive(Debug)]
 pub struct MitMotor {
     cred: Credential,
     target: Target,
+    /// Gains from the manifest, used when enabling.
+    gains: (f32, f32),
     dirty: bool,
-    enable: Option<bool>,
-    enabled: bool,
-    commanded: bool,
-    /// Bit per channel ever sampled: every reply updates them.
+    /// Bit per channel ever sampled: every reply (and report) updates them.
     sampled: u8,
+    /// Unmanaged: an enter/exit frame asked for through the `enable` channel.
+    special: Option<MitSpecial>,
     /// A sample was asked for this tick: a frame must go out.
     poll: bool,
+    /// In motor mode, as far as we commanded it.
+    enabled: bool,
+    commanded: bool,
     last_p: Option<f32>,
+    temperature: Option<u8>,
     fault_tick: Option<u64>,
     faults: u64,
+    // Lifecycle.
+    status: DeviceStatus,
+    startup: Startup,
+    goal: Goal,
+    user_off: bool,
+    resume_on: bool,
+    step: Step,
+    sent: bool,
+    tries: u8,
+    next_try_ns: u64,
+    /// The request whose answer completes the step.
+    awaiting: Option<Op>,
+    /// The command a safe action sends (re-sent every tick while tripped in motor mode).
+    safe_cmd: Option<Op>,
 }
 
 impl MitMotor {
-    /// The motor with CAN ID `cred.id`, gains `kp`/`kd` until written; with `enable_on_start`
-    /// the first tick enters motor mode.
-    pub fn new(cred: Credential, kp: f32, kd: f32, enable_on_start: bool) -> Self {
+    /// The motor with CAN ID `cred.id`, gains `kp`/`kd` until written.
+    pub fn new(cred: Credential, kp: f32, kd: f32) -> Self {
         Self {
             cred,
             target: Target {
@@ -75,15 +133,28 @@ impl MitMotor {
                 kd,
                 ..Target::default()
             },
+            gains: (kp, kd),
             dirty: false,
-            enable: enable_on_start.then_some(true),
+            sampled: 0,
+            special: None,
+            poll: false,
             enabled: false,
             commanded: false,
-            sampled: 0,
-            poll: false,
             last_p: None,
+            temperature: None,
             fault_tick: None,
             faults: 0,
+            status: DeviceStatus::UNMANAGED,
+            startup: Startup::Enable,
+            goal: Goal::Limp,
+            user_off: false,
+            resume_on: false,
+            step: Step::None,
+            sent: false,
+            tries: 0,
+            next_try_ns: 0,
+            awaiting: None,
+            safe_cmd: None,
         }
     }
 
@@ -93,6 +164,10 @@ impl MitMotor {
     /// Fault replies (8-byte replies with a fault code) since start.
     pub fn faults(&self) -> u64 {
         self.faults
+    }
+
+    fn managed(&self) -> bool {
+        self.status.phase != Phase::Unmanaged
     }
 
     fn push(&self, op: Op, ctx: TickCtx, out: &mut Bounded<Request>) {
@@ -109,6 +184,171 @@ impl MitMotor {
             t: t.t,
         }
     }
+
+    /// Holding `p` with the configured gains: what enabling sends.
+    fn hold_at(&mut self, p: f32) -> Op {
+        self.target = Target {
+            p,
+            v: 0.0,
+            kp: self.gains.0,
+            kd: self.gains.1,
+            t: 0.0,
+        };
+        self.command()
+    }
+
+    fn go(&mut self, step: Step) {
+        self.step = step;
+        self.sent = false;
+        self.tries = 0;
+        self.awaiting = None;
+    }
+
+    fn driving(&self) -> bool {
+        matches!(self.status.phase, Phase::Enabled | Phase::Unmanaged)
+    }
+
+    /// Lifecycle requests of this tick; true if a frame went out.
+    fn drive(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) -> bool {
+        if !self.managed() || self.sent || ctx.now_ns < self.next_try_ns {
+            return false;
+        }
+        match self.step {
+            Step::None => return false,
+            Step::Probe => {
+                let op = Op::MitSpecial(MitSpecial::Exit);
+                self.push(op, ctx, out);
+                self.enabled = false;
+                self.awaiting = Some(op);
+            }
+            Step::Enable => {
+                let Some(p) = self.last_p else {
+                    // Where it is must be known first: poll.
+                    self.go(Step::Probe);
+                    return self.drive(ctx, out);
+                };
+                self.push(Op::MitSpecial(MitSpecial::Enter), ctx, out);
+                let cmd = self.hold_at(p);
+                self.push(cmd, ctx, out);
+                self.enabled = true;
+                self.commanded = true;
+                self.awaiting = Some(cmd);
+            }
+            Step::Safe => {
+                // A retry of the action.
+                let Some(op) = self.awaiting else {
+                    return false;
+                };
+                self.push(op, ctx, out);
+            }
+        }
+        self.sent = true;
+        self.dirty = false;
+        true
+    }
+
+    fn retry(&mut self, now_ns: u64) {
+        self.tries += 1;
+        let (limit, spacing) = match self.step {
+            Step::Probe => (PROBE_TRIES, PROBE_SPACING_NS),
+            _ => (STEP_TRIES, 0),
+        };
+        if self.tries < limit {
+            self.sent = false;
+            self.next_try_ns = now_ns + spacing;
+            return;
+        }
+        match self.step {
+            Step::Probe => {
+                self.status.failure = Some(Failure::NoAnswer);
+                self.status.phase = Phase::Failed;
+            }
+            Step::Enable => {
+                self.status.failure = Some(Failure::EnableRefused);
+                self.status.phase = Phase::Disabled;
+                self.goal = Goal::Limp;
+                self.enabled = false;
+            }
+            Step::Safe | Step::None => {}
+        }
+        self.step = Step::None;
+    }
+
+    /// The answer to the step's request arrived.
+    fn step_done(&mut self) {
+        match self.step {
+            Step::Probe => {
+                if self.goal == Goal::Limp {
+                    self.status.phase = Phase::Disabled;
+                    self.step = Step::None;
+                    if self.status.tripped {
+                        self.status.safe = SafeProgress::Confirmed;
+                    }
+                } else {
+                    self.status.phase = Phase::Enabling;
+                    self.go(Step::Enable);
+                }
+            }
+            Step::Enable => {
+                if self.status.fault != 0 {
+                    // A faulted motor does not enter motor mode.
+                    self.status.failure = Some(Failure::EnableRefused);
+                    self.status.phase = Phase::Disabled;
+                    self.goal = Goal::Limp;
+                    self.enabled = false;
+                } else if self.goal == Goal::Hold {
+                    self.status.phase = Phase::Holding;
+                    self.status.safe = SafeProgress::Confirmed;
+                } else {
+                    self.status.phase = Phase::Enabled;
+                    self.status.failure = None;
+                    self.status.tripped = false;
+                    self.status.safe = SafeProgress::None;
+                }
+                self.step = Step::None;
+            }
+            Step::Safe => {
+                self.status.safe = SafeProgress::Confirmed;
+                self.step = Step::None;
+            }
+            Step::None => {}
+        }
+    }
+
+    fn life_reply(&mut self, reply: &Reply) {
+        if !self.managed() || self.step == Step::None {
+            return;
+        }
+        let Some(want) = self.awaiting else { return };
+        if reply.op != Some(want) {
+            return;
+        }
+        match reply.data {
+            ReplyData::Mit { .. } => self.step_done(),
+            ReplyData::Missing { .. } => self.retry(reply.t_sample_ns),
+            _ => {}
+        }
+    }
+
+    fn start_enable(&mut self) {
+        self.goal = Goal::Drive;
+        self.user_off = false;
+        self.dirty = false;
+        self.safe_cmd = None;
+        self.status.phase = Phase::Enabling;
+        // Where it is now, never a target from before: poll first, then enter and hold there.
+        self.go(Step::Probe);
+        self.status.phase = Phase::Enabling;
+    }
+
+    fn start_disable(&mut self) {
+        self.goal = Goal::Limp;
+        self.user_off = true;
+        self.dirty = false;
+        self.safe_cmd = None;
+        self.status.phase = Phase::Disabled;
+        self.go(Step::Probe);
+    }
 }
 
 impl Device for MitMotor {
@@ -121,9 +361,9 @@ impl Device for MitMotor {
     }
 
     fn sample(&mut self, channel: usize, _ctx: TickCtx, _out: &mut Bounded<Request>) {
+        self.sampled |= 1 << channel;
         // The frame that samples goes out at flush, combined with the tick's writes.
-        if channel <= mit_channel::TORQUE {
-            self.sampled |= 1 << channel;
+        if channel <= mit_channel::TORQUE || channel == mit_channel::TEMPERATURE {
             self.poll = true;
         }
     }
@@ -132,17 +372,44 @@ impl Device for MitMotor {
         if !value.is_finite() {
             return;
         }
+        if channel == mit_channel::ENABLE {
+            if !self.managed() {
+                self.special = Some(if value >= 0.5 {
+                    MitSpecial::Enter
+                } else {
+                    MitSpecial::Exit
+                });
+                return;
+            }
+            if value >= 0.5 {
+                if !matches!(self.status.phase, Phase::Enabled | Phase::Enabling) {
+                    self.start_enable();
+                }
+            } else {
+                self.start_disable();
+            }
+            return;
+        }
+        if !self.accepts(channel) {
+            return;
+        }
+        if self.status.phase == Phase::Disabled {
+            // A hold-off motor's first setpoint: enable from where it is, then apply it.
+            self.start_enable();
+        }
         let v = value as f32;
         let t = &mut self.target;
         match channel {
             mit_channel::POSITION => t.p = v,
             mit_channel::VELOCITY => t.v = v,
             mit_channel::TORQUE => t.t = v,
-            mit_channel::KP => t.kp = v,
-            mit_channel::KD => t.kd = v,
-            mit_channel::ENABLE => {
-                self.enable = Some(value >= 0.5);
-                return;
+            mit_channel::KP => {
+                t.kp = v;
+                self.gains.0 = v;
+            }
+            mit_channel::KD => {
+                t.kd = v;
+                self.gains.1 = v;
             }
             _ => return,
         }
@@ -150,28 +417,43 @@ impl Device for MitMotor {
     }
 
     fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
-        let mut sent = false;
-        if self.dirty || self.enable.is_some() {
-            // The command's reply answers this tick's samples.
-            self.poll = false;
+        let poll = std::mem::take(&mut self.poll);
+        if self.managed() {
+            if self.drive(ctx, out) {
+                return;
+            }
+            match self.status.phase {
+                Phase::Enabled => {}
+                Phase::Holding => {
+                    // Keep holding (and feeding the motor's CAN timeout).
+                    if let Some(op) = self.safe_cmd {
+                        self.push(op, ctx, out);
+                    }
+                    return;
+                }
+                Phase::Disabled if poll => {
+                    self.push(Op::MitSpecial(MitSpecial::Exit), ctx, out);
+                    return;
+                }
+                _ => return,
+            }
         }
-        if let Some(on) = self.enable.take() {
-            let s = if on {
-                MitSpecial::Enter
-            } else {
-                MitSpecial::Exit
-            };
+        let mut sent = false;
+        if let Some(s) = self.special.take() {
             self.push(Op::MitSpecial(s), ctx, out);
-            self.enabled = on;
+            self.enabled = s == MitSpecial::Enter;
             sent = true;
         }
         if self.dirty {
             self.dirty = false;
             self.push(self.command(), ctx, out);
             self.commanded = true;
-            sent = true;
+            return;
         }
-        if !sent && std::mem::take(&mut self.poll) {
+        if sent {
+            return;
+        }
+        if poll {
             let op = if self.enabled && self.commanded {
                 self.command()
             } else if self.enabled {
@@ -184,49 +466,197 @@ impl Device for MitMotor {
     }
 
     fn reply(&mut self, reply: &Reply, out: &mut Bounded<Update>) {
-        let (vals, fault) = match reply.data {
-            ReplyData::Mit { p, v, t } => {
+        let vals = match reply.data {
+            ReplyData::Mit {
+                p,
+                v,
+                t,
+                temperature,
+            } => {
                 self.last_p = Some(p);
-                (Some([p as f64, v as f64, t as f64]), false)
+                if temperature.is_some() {
+                    self.temperature = temperature;
+                    if self.fault_tick != Some(reply.tick) {
+                        // A long reply without a fault code: the fault has cleared.
+                        self.status.fault = 0;
+                    }
+                }
+                Some([p as f64, v as f64, t as f64])
             }
-            ReplyData::Missing { .. } => (None, false),
-            ReplyData::DeviceError { .. } => {
+            ReplyData::Missing { .. } => None,
+            ReplyData::DeviceError { code } => {
                 self.faults += 1;
                 self.fault_tick = Some(reply.tick);
+                self.status.fault = code;
                 return;
             }
             _ => return,
         };
-        let fault = fault || self.fault_tick == Some(reply.tick);
+        self.life_reply(reply);
+        let fault = self.fault_tick == Some(reply.tick);
         for ch in 0..3 {
-            if self.sampled & (1 << ch) == 0 {
-                continue;
+            if self.sampled & (1 << ch) != 0 {
+                let _ = out.push(Update::from_reply(reply, ch, vals.map(|v| v[ch]), fault));
             }
-            let _ = out.push(Update::from_reply(reply, ch, vals.map(|v| v[ch]), fault));
+        }
+        if self.sampled & (1 << mit_channel::TEMPERATURE) != 0 && vals.is_some() {
+            let t = self.temperature.map(f64::from);
+            let _ = out.push(Update::from_reply(reply, mit_channel::TEMPERATURE, t, fault));
         }
     }
 
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        match action {
-            SafeAction::TorqueOff => {
-                self.enabled = false;
-                self.dirty = false;
-                self.push(Op::MitSpecial(MitSpecial::Exit), ctx, out);
-            }
-            SafeAction::Hold => match self.last_p {
-                Some(p) => {
-                    self.target.p = p;
-                    self.target.v = 0.0;
-                    self.target.t = 0.0;
-                    self.dirty = false;
-                    self.push(self.command(), ctx, out);
-                }
-                None => self.safe(SafeAction::TorqueOff, ctx, out),
-            },
-            SafeAction::Setpoint { channel, value } => {
-                self.write(channel, value, ctx);
-                self.flush(ctx, out);
+        let managed = self.managed();
+        let up = matches!(
+            self.status.phase,
+            Phase::Enabled | Phase::Enabling | Phase::Holding | Phase::Disabled | Phase::Unmanaged
+        );
+        self.dirty = false;
+        if managed {
+            self.go(Step::Safe);
+            self.status.safe = SafeProgress::Pending;
+            if !up {
+                self.step = Step::None;
+                return;
             }
         }
+        let op = match action {
+            SafeAction::Hold | SafeAction::Damp { .. } if self.last_p.is_none() || !self.enabled => {
+                return self.safe(SafeAction::TorqueOff, ctx, out)
+            }
+            SafeAction::TorqueOff => {
+                self.enabled = false;
+                self.goal = Goal::Limp;
+                if managed {
+                    self.status.phase = Phase::Disabled;
+                }
+                Op::MitSpecial(MitSpecial::Exit)
+            }
+            SafeAction::Hold => {
+                let p = self.last_p.unwrap_or(0.0);
+                self.hold_at(p)
+            }
+            SafeAction::Damp { kd } => {
+                let p = self.last_p.unwrap_or(0.0);
+                self.target = Target {
+                    p,
+                    v: 0.0,
+                    kp: 0.0,
+                    kd: kd as f32,
+                    t: 0.0,
+                };
+                self.command()
+            }
+            SafeAction::Setpoint { channel, value } => {
+                let v = value as f32;
+                match channel {
+                    mit_channel::POSITION => self.target.p = v,
+                    mit_channel::VELOCITY => self.target.v = v,
+                    mit_channel::TORQUE => self.target.t = v,
+                    _ => {}
+                }
+                self.command()
+            }
+        };
+        self.push(op, ctx, out);
+        if managed {
+            self.awaiting = Some(op);
+            self.sent = true;
+            if matches!(op, Op::Mit { .. }) {
+                self.safe_cmd = Some(op);
+                self.status.phase = Phase::Holding;
+                if self.status.tripped {
+                    self.goal = Goal::Hold;
+                }
+            }
+        }
+    }
+
+    fn status(&self) -> DeviceStatus {
+        self.status
+    }
+
+    fn bring_up(&mut self, startup: Startup, _ctx: TickCtx) {
+        let tripped = self.status.tripped;
+        self.startup = startup;
+        self.goal = if self.resume_on || (startup == Startup::Enable && !self.user_off && !tripped)
+        {
+            Goal::Drive
+        } else if tripped && self.goal == Goal::Hold {
+            Goal::Hold
+        } else {
+            Goal::Limp
+        };
+        self.status = DeviceStatus {
+            tripped,
+            fault: self.status.fault,
+            ..DeviceStatus::probing()
+        };
+        self.enabled = false;
+        self.commanded = false;
+        self.go(Step::Probe);
+        self.next_try_ns = 0;
+    }
+
+    fn bus_lost(&mut self) {
+        if !self.managed() {
+            return;
+        }
+        self.resume_on = matches!(self.status.phase, Phase::Enabled | Phase::Enabling);
+        self.status.phase = Phase::Offline;
+        if self.status.safe == SafeProgress::Pending {
+            self.status.safe = SafeProgress::None;
+        }
+        self.step = Step::None;
+        self.dirty = false;
+    }
+
+    fn accepts(&self, channel: usize) -> bool {
+        if channel == mit_channel::ENABLE {
+            return true;
+        }
+        if !CHANNELS.get(channel).is_some_and(|c| c.writable) {
+            return false;
+        }
+        match self.status.phase {
+            Phase::Unmanaged | Phase::Enabled => true,
+            Phase::Disabled => {
+                self.startup == Startup::HoldOff && !self.status.tripped && !self.user_off
+            }
+            _ => false,
+        }
+    }
+
+    fn trip(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
+        self.resume_on = false;
+        if self.managed() {
+            self.status.tripped = true;
+        }
+        self.goal = Goal::Limp;
+        self.safe(action, ctx, out);
+    }
+
+    fn report(&mut self, ctx: TickCtx, out: &mut Bounded<Update>) {
+        let local = [
+            (mit_channel::KP, self.target.kp as f64),
+            (mit_channel::KD, self.target.kd as f64),
+            (
+                mit_channel::ENABLE,
+                (self.enabled && self.driving()) as u8 as f64,
+            ),
+            (mit_channel::FAULT, self.status.fault as f64),
+        ];
+        for (ch, v) in local {
+            if self.sampled & (1 << ch) != 0 {
+                let _ = out.push(Update::local(ch, v, ctx));
+            }
+        }
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "MIT-mode motor (no model number on the bus); gains kp {} kd {}",
+            self.gains.0, self.gains.1
+        )
     }
 }

@@ -5,20 +5,26 @@
 //!
 //! | Type | Bus | Channels | Declared safe action |
 //! |---|---|---|---|
-//! | [`DynamixelX`] | Dynamixel 2.0 | position, velocity, current, goal_position, torque_enable, operating_mode, temperature, voltage | hold |
-//! | [`Dynamixel1`] | Dynamixel 1.0 | position, velocity, load, torque_enable, temperature, voltage | hold |
-//! | [`MitMotor`] | CAN (MIT mode) | position, velocity, torque, kp, kd, enable | torque off |
-//! | [`OdriveAxis`] | CAN (ODrive) | position, velocity, torque, current, state, error, bus_voltage, temperature | torque off |
+//! | [`DynamixelX`] | Dynamixel 2.0 | position, velocity, current, goal_position, torque_enable, operating_mode, temperature, voltage, hardware_error, enable | hold |
+//! | [`Dynamixel1`] | Dynamixel 1.0 | position, velocity, load, torque_enable, temperature, voltage, enable | hold |
+//! | [`MitMotor`] | CAN (MIT mode) | position, velocity, torque, kp, kd, enable, temperature, fault | torque off |
+//! | [`OdriveAxis`] | CAN (ODrive) | position, velocity, torque, current, state, error, bus_voltage, temperature, enable | torque off |
+//!
+//! Every actuator has an `enable` channel and a lifecycle ([`crate::lifecycle`]): brought up by
+//! the executor (probe, model check, configuration, enable from the present position), tripped
+//! by the watchdog or a fault, re-enabled through `enable`.
 
 mod dynamixel;
 mod mit;
 mod odrive;
+mod reg_device;
 mod register;
 
 pub use dynamixel::{
-    dxl1_channel, x_channel, x_table, Dxl1Model, Dxl1Series, DxlXConfig, Dynamixel1, DynamixelX,
-    XSeries,
+    dxl1_channel, x_channel, x_models, x_table, Dxl1Model, Dxl1Series, DxlXConfig, DxlXSetup,
+    Dynamixel1, DynamixelX, XSeries, AX_MODELS, MX_MODELS, X_MODELS,
 };
 pub use mit::{mit_channel, MitMotor};
 pub use odrive::{odrive_channel, OdriveAxis, OdriveMode};
-pub use register::{ControlTable, Encoding, RegChannel, RegDevice};
+pub use reg_device::{Layout, RegDevice};
+pub use register::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};

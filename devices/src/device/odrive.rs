@@ -5,11 +5,27 @@
 //! and velocity share Get_Encoder_Estimates); with `poll = false` the device relies on the
 //! axis's cyclic messages instead. A tick's setpoints become one Set_Input_Pos (position
 //! mode, with velocity and torque as feed-forward), Set_Input_Vel or Set_Input_Torque.
+//!
+//! Lifecycle (managed by the executor):
+//!
+//! ```text
+//! Probe    Heartbeat (remote frame): it is there; its state and axis error
+//! Align    Set_Controller_Mode, Get_Encoder_Estimates: where it is
+//! Enable   Clear_Errors if an error is latched, the input set to where it is (position mode;
+//!          0 velocity or torque otherwise), Set_Axis_State(closed loop), then Heartbeats until
+//!          it reports closed loop without error
+//! ```
+//!
+//! CAN Simple cannot read back the controller mode, so it is written at every enable. The axis
+//! disarms itself on an error (axis error in the heartbeat): that trips it.
 
 use std::f64::consts::TAU;
 
 use conductor_protocols::odrive_can::{axis_state, control_mode, input_mode, CmdId, Message};
 
+use crate::lifecycle::{
+    DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES,
+};
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::protocol::odrive_get;
 use crate::queue::Bounded;
@@ -25,7 +41,7 @@ pub mod odrive_channel {
     pub const TORQUE: usize = 2;
     /// Iq measured (A), read-only.
     pub const CURRENT: usize = 3;
-    /// Axis state (8 = closed loop, 1 = idle): heartbeat; requested state.
+    /// Axis state (8 = closed loop, 1 = idle), from the heartbeat.
     pub const STATE: usize = 4;
     /// Axis error bits from the heartbeat, read-only.
     pub const ERROR: usize = 5;
@@ -33,18 +49,47 @@ pub mod odrive_channel {
     pub const BUS_VOLTAGE: usize = 6;
     /// Motor temperature (°C), read-only.
     pub const TEMPERATURE: usize = 7;
+    /// 1 while in closed loop control; write 1 to enable from where it is, 0 to idle it.
+    pub const ENABLE: usize = 8;
 }
 
-const CHANNELS: [Channel; 8] = [
+const CHANNELS: [Channel; 9] = [
     Channel::read_write("position", "rad"),
     Channel::read_write("velocity", "rad/s"),
     Channel::read_write("torque", "N.m"),
     Channel::read_only("current", "A"),
-    Channel::read_write("state", ""),
+    Channel::read_only("state", ""),
     Channel::read_only("error", ""),
     Channel::read_only("bus_voltage", "V"),
     Channel::read_only("temperature", "degC"),
+    Channel::read_write("enable", ""),
 ];
+
+/// Polls of the heartbeat, one per tick, while waiting for the axis to enter closed loop.
+const CONFIRM_POLLS: u8 = 50;
+
+/// Where a lifecycle should end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Goal {
+    Drive,
+    Hold,
+    Limp,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Step {
+    None,
+    /// Heartbeat request out.
+    Probe,
+    /// Controller mode written, encoder estimates requested.
+    Align,
+    /// Input set, closed loop requested: heartbeats until it says so.
+    Enable,
+    /// Idle requested (limp goal): heartbeats until it says so.
+    Idle,
+    /// A safe action: heartbeats until the axis shows it.
+    Safe,
+}
 
 /// Which input the axis's controller takes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -77,37 +122,275 @@ pub struct OdriveAxis {
     cred: Credential,
     mode: OdriveMode,
     poll: bool,
-    start: bool,
     pos: f64,
     vel: f64,
     torque: f64,
     dirty: bool,
-    state: Option<u32>,
     /// Messages requested this tick (dedupe), with the tick.
     asked: (u64, u32),
     last_pos: Option<f64>,
+    /// Axis state and error from the last heartbeat.
+    axis: Option<(u32, u32)>,
     fault_tick: Option<u64>,
+    report_enable: bool,
+    /// Unmanaged: closed loop (or idle) asked for through the `enable` channel.
+    raw_enable: Option<bool>,
+    // Lifecycle.
+    status: DeviceStatus,
+    startup: Startup,
+    goal: Goal,
+    user_off: bool,
+    resume_on: bool,
+    step: Step,
+    sent: bool,
+    tries: u8,
+    next_try_ns: u64,
+    /// The state the axis must report to complete the step.
+    want_state: u32,
+    /// The safe action's setpoint (re-sent while holding).
+    safe_msg: Option<Message>,
 }
 
 impl OdriveAxis {
     /// The axis with node ID `cred.id`; `poll` requests values with remote frames (else the
-    /// axis's cyclic messages are used); `enable_on_start` sets the controller mode and closed
-    /// loop control on the first tick.
-    pub fn new(cred: Credential, mode: OdriveMode, poll: bool, enable_on_start: bool) -> Self {
+    /// axis's cyclic messages are used).
+    pub fn new(cred: Credential, mode: OdriveMode, poll: bool) -> Self {
         Self {
             cred,
             mode,
             poll,
-            start: enable_on_start,
             pos: 0.0,
             vel: 0.0,
             torque: 0.0,
             dirty: false,
-            state: None,
             asked: (u64::MAX, 0),
             last_pos: None,
+            axis: None,
             fault_tick: None,
+            report_enable: false,
+            raw_enable: None,
+            status: DeviceStatus::UNMANAGED,
+            startup: Startup::Enable,
+            goal: Goal::Limp,
+            user_off: false,
+            resume_on: false,
+            step: Step::None,
+            sent: false,
+            tries: 0,
+            next_try_ns: 0,
+            want_state: 0,
+            safe_msg: None,
         }
+    }
+
+    fn managed(&self) -> bool {
+        self.status.phase != Phase::Unmanaged
+    }
+
+    fn go(&mut self, step: Step) {
+        self.step = step;
+        self.sent = false;
+        self.tries = 0;
+    }
+
+    fn control_mode(&self) -> u32 {
+        match self.mode {
+            OdriveMode::Position => control_mode::POSITION,
+            OdriveMode::Velocity => control_mode::VELOCITY,
+            OdriveMode::Torque => control_mode::TORQUE,
+        }
+    }
+
+    /// The input that holds the axis where it is (position mode) or still (others).
+    fn hold_input(&mut self, pos: f64) -> Message {
+        self.pos = pos;
+        self.vel = 0.0;
+        self.torque = 0.0;
+        self.setpoint()
+    }
+
+    fn heartbeat(&self, ctx: TickCtx, out: &mut Bounded<Request>) {
+        if let Some(m) = odrive_get(CmdId::Heartbeat) {
+            self.push(m, ctx, out);
+        }
+    }
+
+    /// Lifecycle requests of this tick.
+    fn drive(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
+        if !self.managed() || self.sent || ctx.now_ns < self.next_try_ns {
+            return;
+        }
+        match self.step {
+            Step::None => return,
+            Step::Probe => self.heartbeat(ctx, out),
+            Step::Align => {
+                self.push(
+                    Message::SetControllerMode {
+                        control_mode: self.control_mode(),
+                        input_mode: input_mode::PASSTHROUGH,
+                    },
+                    ctx,
+                    out,
+                );
+                if let Some(m) = odrive_get(CmdId::GetEncoderEstimates) {
+                    self.push(m, ctx, out);
+                }
+            }
+            Step::Enable if self.tries == 0 => {
+                if self.status.fault != 0 {
+                    self.push(Message::ClearErrors { identify: 0 }, ctx, out);
+                }
+                let input = self.hold_input(self.last_pos.unwrap_or(0.0));
+                self.push(input, ctx, out);
+                self.push(
+                    Message::SetAxisState {
+                        requested_state: axis_state::CLOSED_LOOP_CONTROL,
+                    },
+                    ctx,
+                    out,
+                );
+                self.want_state = axis_state::CLOSED_LOOP_CONTROL;
+                self.heartbeat(ctx, out);
+            }
+            Step::Idle if self.tries == 0 => {
+                self.push(
+                    Message::SetAxisState {
+                        requested_state: axis_state::IDLE,
+                    },
+                    ctx,
+                    out,
+                );
+                self.want_state = axis_state::IDLE;
+                self.heartbeat(ctx, out);
+            }
+            Step::Enable | Step::Idle | Step::Safe => self.heartbeat(ctx, out),
+        }
+        self.sent = true;
+    }
+
+    /// A heartbeat (asked or cyclic) arrived.
+    fn on_heartbeat(&mut self, state: u32, error: u32) {
+        self.axis = Some((state, error));
+        if self.managed() {
+            self.status.fault = error;
+        }
+        match self.step {
+            Step::Probe => {
+                if self.goal == Goal::Limp {
+                    if state == axis_state::IDLE {
+                        self.settle_limp();
+                    } else {
+                        self.go(Step::Idle);
+                    }
+                } else {
+                    self.status.phase = Phase::Configuring;
+                    self.go(Step::Align);
+                }
+            }
+            Step::Enable | Step::Idle | Step::Safe if self.sent => {
+                if state == self.want_state && (error == 0 || self.want_state == axis_state::IDLE) {
+                    self.confirmed();
+                } else {
+                    self.poll_again();
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn settle_limp(&mut self) {
+        self.status.phase = Phase::Disabled;
+        self.step = Step::None;
+        if self.status.tripped {
+            self.status.safe = SafeProgress::Confirmed;
+        }
+    }
+
+    fn confirmed(&mut self) {
+        match self.step {
+            Step::Enable => {
+                if self.goal == Goal::Hold {
+                    self.status.phase = Phase::Holding;
+                    self.status.safe = SafeProgress::Confirmed;
+                } else {
+                    self.status.phase = Phase::Enabled;
+                    self.status.failure = None;
+                    self.status.tripped = false;
+                    self.status.safe = SafeProgress::None;
+                }
+                self.step = Step::None;
+            }
+            Step::Idle => self.settle_limp(),
+            Step::Safe => {
+                self.status.safe = SafeProgress::Confirmed;
+                self.step = Step::None;
+            }
+            _ => {}
+        }
+    }
+
+    /// The axis is not there yet: ask again next tick, up to a bound.
+    fn poll_again(&mut self) {
+        self.tries += 1;
+        self.sent = false;
+        if self.tries >= CONFIRM_POLLS {
+            match self.step {
+                Step::Enable => {
+                    self.status.failure = Some(Failure::EnableRefused);
+                    self.status.phase = Phase::Disabled;
+                    self.goal = Goal::Limp;
+                }
+                // The action stays unconfirmed.
+                _ => {}
+            }
+            self.step = Step::None;
+        }
+    }
+
+    fn missing(&mut self, now_ns: u64) {
+        match self.step {
+            Step::Probe => {
+                self.tries += 1;
+                if self.tries >= PROBE_TRIES {
+                    self.status.failure = Some(Failure::NoAnswer);
+                    self.status.phase = Phase::Failed;
+                    self.step = Step::None;
+                } else {
+                    self.sent = false;
+                    self.next_try_ns = now_ns + PROBE_SPACING_NS;
+                }
+            }
+            Step::Align => {
+                self.tries += 1;
+                self.sent = false;
+                if self.tries >= PROBE_TRIES {
+                    self.status.failure = Some(Failure::NoAnswer);
+                    self.status.phase = Phase::Failed;
+                    self.step = Step::None;
+                }
+            }
+            Step::Enable | Step::Idle | Step::Safe => self.poll_again(),
+            Step::None => {}
+        }
+    }
+
+    fn start_enable(&mut self) {
+        self.goal = Goal::Drive;
+        self.user_off = false;
+        self.dirty = false;
+        self.safe_msg = None;
+        self.status.phase = Phase::Enabling;
+        // Where it is now, never a target from before.
+        self.go(Step::Align);
+    }
+
+    fn start_disable(&mut self) {
+        self.goal = Goal::Limp;
+        self.user_off = true;
+        self.dirty = false;
+        self.safe_msg = None;
+        self.status.phase = Phase::Disabled;
+        self.go(Step::Idle);
     }
 
     /// The safe action this kind declares: idle the axis.
@@ -157,7 +440,15 @@ impl Device for OdriveAxis {
     }
 
     fn sample(&mut self, channel: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
-        if !self.poll {
+        if channel == odrive_channel::ENABLE {
+            self.report_enable = true;
+            return;
+        }
+        let absent = matches!(
+            self.status.phase,
+            Phase::Offline | Phase::Probing | Phase::Failed
+        );
+        if !self.poll || absent {
             return;
         }
         let Some(cmd) = source(channel) else { return };
@@ -179,41 +470,64 @@ impl Device for OdriveAxis {
             return;
         }
         use odrive_channel::*;
+        if channel == ENABLE {
+            if !self.managed() {
+                self.raw_enable = Some(value >= 0.5);
+                return;
+            }
+            if value >= 0.5 {
+                if !matches!(self.status.phase, Phase::Enabled | Phase::Enabling) {
+                    self.start_enable();
+                }
+            } else {
+                self.start_disable();
+            }
+            return;
+        }
+        if !self.accepts(channel) {
+            return;
+        }
+        if self.status.phase == Phase::Disabled {
+            // A hold-off axis's first setpoint: enable from where it is, then apply it.
+            self.start_enable();
+        }
         match channel {
             POSITION => self.pos = value,
             VELOCITY => self.vel = value,
             TORQUE => self.torque = value,
-            STATE if (0.0..=15.0).contains(&value) => {
-                self.state = Some(value.round() as u32);
-                return;
-            }
             _ => return,
         }
         self.dirty = true;
     }
 
     fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
-        if std::mem::take(&mut self.start) {
-            let control_mode = match self.mode {
-                OdriveMode::Position => control_mode::POSITION,
-                OdriveMode::Velocity => control_mode::VELOCITY,
-                OdriveMode::Torque => control_mode::TORQUE,
+        self.drive(ctx, out);
+        if let Some(on) = self.raw_enable.take() {
+            if on {
+                self.push(
+                    Message::SetControllerMode {
+                        control_mode: self.control_mode(),
+                        input_mode: input_mode::PASSTHROUGH,
+                    },
+                    ctx,
+                    out,
+                );
+            }
+            let requested_state = if on {
+                axis_state::CLOSED_LOOP_CONTROL
+            } else {
+                axis_state::IDLE
             };
-            self.push(
-                Message::SetControllerMode {
-                    control_mode,
-                    input_mode: input_mode::PASSTHROUGH,
-                },
-                ctx,
-                out,
-            );
-            self.state.get_or_insert(axis_state::CLOSED_LOOP_CONTROL);
+            self.push(Message::SetAxisState { requested_state }, ctx, out);
         }
-        if let Some(s) = self.state.take() {
-            self.push(Message::SetAxisState { requested_state: s }, ctx, out);
-        }
-        if std::mem::take(&mut self.dirty) {
-            self.push(self.setpoint(), ctx, out);
+        match self.status.phase {
+            Phase::Unmanaged | Phase::Enabled => {
+                if std::mem::take(&mut self.dirty) {
+                    self.push(self.setpoint(), ctx, out);
+                }
+            }
+            // Holding: the axis keeps its input by itself.
+            _ => {}
         }
     }
 
@@ -225,6 +539,10 @@ impl Device for OdriveAxis {
                 Message::GetEncoderEstimates { pos, vel } => {
                     let p = pos as f64 * TAU;
                     self.last_pos = Some(p);
+                    if self.step == Step::Align && self.sent {
+                        self.status.phase = Phase::Enabling;
+                        self.go(Step::Enable);
+                    }
                     self.update(POSITION, Some(p), fault, reply, out);
                     self.update(VELOCITY, Some(vel as f64 * TAU), fault, reply, out);
                 }
@@ -243,6 +561,7 @@ impl Device for OdriveAxis {
                     if axis_error != 0 {
                         self.fault_tick = Some(reply.tick);
                     }
+                    self.on_heartbeat(axis_state as u32, axis_error);
                     self.update(STATE, Some(axis_state as f64), fault, reply, out);
                     self.update(ERROR, Some(axis_error as f64), fault, reply, out);
                 }
@@ -257,6 +576,11 @@ impl Device for OdriveAxis {
             ReplyData::Missing {
                 op: Op::Odrive(msg),
             } => {
+                if matches!(msg.cmd_id(), CmdId::Heartbeat | CmdId::GetEncoderEstimates)
+                    && self.sent
+                {
+                    self.missing(reply.t_sample_ns);
+                }
                 for ch in 0..CHANNELS.len() {
                     if source(ch) == Some(msg.cmd_id()) {
                         self.update(ch, None, fault, reply, out);
@@ -268,39 +592,141 @@ impl Device for OdriveAxis {
     }
 
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        match action {
-            SafeAction::TorqueOff => {
-                self.dirty = false;
-                self.push(
-                    Message::SetAxisState {
-                        requested_state: axis_state::IDLE,
-                    },
-                    ctx,
-                    out,
-                );
-            }
-            SafeAction::Hold => match self.last_pos {
-                Some(p) => {
-                    self.pos = p;
-                    self.vel = 0.0;
-                    self.torque = 0.0;
-                    self.dirty = false;
-                    self.push(
-                        Message::SetInputPos {
-                            pos: (p / TAU) as f32,
-                            vel_ff: 0.0,
-                            torque_ff: 0.0,
-                        },
-                        ctx,
-                        out,
-                    );
-                }
-                None => self.safe(SafeAction::TorqueOff, ctx, out),
-            },
-            SafeAction::Setpoint { channel, value } => {
-                self.write(channel, value, ctx);
-                self.flush(ctx, out);
+        let managed = self.managed();
+        self.dirty = false;
+        if managed {
+            self.status.safe = SafeProgress::Pending;
+            if !matches!(
+                self.status.phase,
+                Phase::Enabled | Phase::Enabling | Phase::Holding | Phase::Disabled
+            ) {
+                self.step = Step::None;
+                return;
             }
         }
+        let idle = Message::SetAxisState {
+            requested_state: axis_state::IDLE,
+        };
+        let (msg, state) = match action {
+            SafeAction::TorqueOff | SafeAction::Damp { .. } => (idle, axis_state::IDLE),
+            SafeAction::Hold => match self.last_pos {
+                Some(p) if self.status.phase != Phase::Disabled => {
+                    (self.hold_input(p), axis_state::CLOSED_LOOP_CONTROL)
+                }
+                _ => (idle, axis_state::IDLE),
+            },
+            SafeAction::Setpoint { channel, value } => {
+                match channel {
+                    odrive_channel::POSITION => self.pos = value,
+                    odrive_channel::VELOCITY => self.vel = value,
+                    odrive_channel::TORQUE => self.torque = value,
+                    _ => {}
+                }
+                (self.setpoint(), axis_state::CLOSED_LOOP_CONTROL)
+            }
+        };
+        self.push(msg, ctx, out);
+        if !managed {
+            return;
+        }
+        if state == axis_state::IDLE {
+            self.goal = Goal::Limp;
+            self.status.phase = Phase::Disabled;
+            self.safe_msg = None;
+        } else {
+            self.safe_msg = Some(msg);
+            self.status.phase = Phase::Holding;
+            if self.status.tripped {
+                self.goal = Goal::Hold;
+            }
+        }
+        // Confirmed by the axis's heartbeat showing the state.
+        self.go(Step::Safe);
+        self.want_state = state;
+        self.heartbeat(ctx, out);
+        self.sent = true;
+    }
+
+    fn status(&self) -> DeviceStatus {
+        self.status
+    }
+
+    fn bring_up(&mut self, startup: Startup, _ctx: TickCtx) {
+        let tripped = self.status.tripped;
+        self.startup = startup;
+        self.goal = if self.resume_on || (startup == Startup::Enable && !self.user_off && !tripped)
+        {
+            Goal::Drive
+        } else if tripped && self.goal == Goal::Hold {
+            Goal::Hold
+        } else {
+            Goal::Limp
+        };
+        self.status = DeviceStatus {
+            tripped,
+            fault: self.status.fault,
+            ..DeviceStatus::probing()
+        };
+        self.go(Step::Probe);
+        self.next_try_ns = 0;
+    }
+
+    fn bus_lost(&mut self) {
+        if !self.managed() {
+            return;
+        }
+        self.resume_on = matches!(self.status.phase, Phase::Enabled | Phase::Enabling);
+        self.status.phase = Phase::Offline;
+        if self.status.safe == SafeProgress::Pending {
+            self.status.safe = SafeProgress::None;
+        }
+        self.step = Step::None;
+        self.dirty = false;
+    }
+
+    fn accepts(&self, channel: usize) -> bool {
+        if channel == odrive_channel::ENABLE {
+            return self.managed();
+        }
+        if !CHANNELS.get(channel).is_some_and(|c| c.writable) {
+            return false;
+        }
+        match self.status.phase {
+            Phase::Unmanaged | Phase::Enabled => true,
+            Phase::Disabled => {
+                self.startup == Startup::HoldOff && !self.status.tripped && !self.user_off
+            }
+            _ => false,
+        }
+    }
+
+    fn trip(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
+        self.resume_on = false;
+        if self.managed() {
+            self.status.tripped = true;
+        }
+        self.goal = Goal::Limp;
+        self.safe(action, ctx, out);
+    }
+
+    fn report(&mut self, ctx: TickCtx, out: &mut Bounded<Update>) {
+        if self.report_enable {
+            let on = matches!(self.status.phase, Phase::Enabled);
+            let _ = out.push(Update::local(odrive_channel::ENABLE, on as u8 as f64, ctx));
+        }
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "ODrive axis, {} control{}",
+            match self.mode {
+                OdriveMode::Position => "position",
+                OdriveMode::Velocity => "velocity",
+                OdriveMode::Torque => "torque",
+            },
+            self.axis
+                .map(|(s, e)| format!("; axis state {s}, error {e:#x}"))
+                .unwrap_or_default()
+        )
     }
 }

@@ -1,15 +1,14 @@
-//! Register-mapped devices (Dynamixel 2.0 and 1.0): one generic device, [`RegDevice`], over a
-//! family's [`ControlTable`]: a table of channels, each a control-table register (or a
-//! read/write register pair) with its size, signedness, scale, offset and the range of raw
-//! values a healthy servo can report.
+//! Register-mapped devices (Dynamixel 2.0 and 1.0): one generic device,
+//! [`RegDevice`](super::RegDevice), over a family's [`ControlTable`]: a table of channels, each a
+//! control-table register (or a read/write register pair) with its size, signedness, scale,
+//! offset and the range of raw values a healthy servo can report, and what the family needs to
+//! be brought up (model numbers, configuration registers, torque, faults).
 //!
 //! Range checks matter: a CRC-16 lets about one damaged packet in 65 536 through, a 1.0
 //! checksum one in 256. A value outside its register's physical range is therefore treated as
 //! damaged: the channel goes stale and the rejection is counted, never delivered.
 
-use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
-use crate::queue::Bounded;
-use crate::stage::{Channel, Device, SafeAction, TickCtx};
+use crate::stage::{Channel, SafeAction};
 
 /// How raw register values are encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -139,16 +138,55 @@ impl RegChannel {
     }
 }
 
+/// A register the manifest's configuration sets at bring-up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ConfigItem {
+    /// Manifest name, for messages.
+    pub name: &'static str,
+    /// Control-table address.
+    pub addr: u16,
+    /// Bytes (1, 2 or 4).
+    pub len: u8,
+    /// Raw value.
+    pub value: i64,
+}
+
+/// Indirect addressing: Indirect Address `n` (2 bytes each from `addr`) holds the address of
+/// the byte that Indirect Data `n` (1 byte each from `data`) reads and writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Indirect {
+    /// Address of Indirect Address 1.
+    pub addr: u16,
+    /// Address of Indirect Data 1.
+    pub data: u16,
+    /// Slots available.
+    pub slots: u16,
+}
+
 /// What sets one family of register-mapped servos apart (its control table); the
-/// [`RegDevice`] it parameterises does the rest.
+/// [`RegDevice`](super::RegDevice) it parameterises does the rest.
 pub trait ControlTable: std::fmt::Debug {
     /// The safe action devices of this family declare.
     const SAFE_ACTION: SafeAction;
     /// The channel whose last value [`SafeAction::Hold`] writes back to its write register
     /// (the present position, written as the goal).
     const HOLD: Option<usize>;
-    /// The register write `(addr, len, value)` that switches torque off.
-    const TORQUE_OFF: Option<(u16, u8, i64)>;
+    /// Torque Enable (1 byte).
+    const TORQUE: u16;
+    /// Whether PING returns the model number (Protocol 2.0); else it is read at
+    /// [`MODEL_AT`](Self::MODEL_AT).
+    const PING_MODEL: bool;
+    /// Model Number (2 bytes).
+    const MODEL_AT: u16 = 0;
+    /// Hardware Error Status (1 byte), where the family latches faults behind an alert bit.
+    const HW_ERROR: Option<u16> = None;
+    /// Status error bits that report a fault condition (Protocol 1.0: input voltage,
+    /// overheating, overload); 0 where faults are latched in [`HW_ERROR`](Self::HW_ERROR).
+    const FAULT_BITS: u8 = 0;
+    /// Whether the family has REBOOT (which clears a latched hardware error).
+    const REBOOT: bool = false;
+    /// Indirect addressing, where the family has it.
+    const INDIRECT: Option<Indirect> = None;
 
     /// The channels, in channel-index order.
     fn channels(&self) -> Vec<RegChannel>;
@@ -158,177 +196,22 @@ pub trait ControlTable: std::fmt::Debug {
     fn on_raw(&mut self, table: &mut [RegChannel], i: usize, raw: i64) {
         let _ = (table, i, raw);
     }
-}
 
-/// A register-mapped device: sampling, buffered writes, reply interpretation, range checks
-/// and safe actions over the channel table of its family `T`.
-#[derive(Debug)]
-pub struct RegDevice<T: ControlTable> {
-    family: T,
-    cred: Credential,
-    table: Vec<RegChannel>,
-    channels: Vec<Channel>,
-    pending: Vec<Option<i64>>,
-    /// Last good raw value read per channel.
-    last: Vec<Option<i64>>,
-    /// Tick whose replies carry a device error (alert / failed instruction).
-    fault_tick: Option<u64>,
-    range_rejects: u64,
-    device_errors: u64,
-    /// Channel index of the present position (for Hold) and the goal-position register.
-    hold: Option<(usize, u16)>,
-}
+    /// The model numbers a device of this configuration may report, with their names; empty:
+    /// any.
+    fn models(&self) -> &'static [(u16, &'static str)];
 
-impl<T: ControlTable> RegDevice<T> {
-    /// The safe action this kind declares.
-    pub const SAFE_ACTION: SafeAction = T::SAFE_ACTION;
+    /// The configuration registers to write at bring-up (built once, at construction).
+    fn config(&self) -> Vec<ConfigItem>;
 
-    /// A device of `family` at `cred`.
-    pub fn with_table(cred: Credential, family: T) -> Self {
-        let table = family.channels();
-        let n = table.len();
-        let hold = T::HOLD.and_then(|i| Some((i, table.get(i)?.write?)));
-        Self {
-            family,
-            cred,
-            channels: table.iter().map(RegChannel::channel).collect(),
-            table,
-            pending: vec![None; n],
-            last: vec![None; n],
-            fault_tick: None,
-            range_rejects: 0,
-            device_errors: 0,
-            hold,
-        }
-    }
+    /// Whether writing `addr` needs torque off (EEPROM, and on X-series the indirect addresses).
+    fn needs_torque_off(&self, addr: u16) -> bool;
 
-    /// The family's control table and state.
-    pub fn family(&self) -> &T {
-        &self.family
-    }
-
-    /// The channel table.
-    pub fn table(&self) -> &[RegChannel] {
-        &self.table
-    }
-
-    /// Values rejected by the range check since start (damaged packets that passed the
-    /// CRC/checksum).
-    pub fn range_rejects(&self) -> u64 {
-        self.range_rejects
-    }
-
-    /// Device error replies since start.
-    pub fn device_errors(&self) -> u64 {
-        self.device_errors
-    }
-
-    /// Last good value of channel `i`, in units.
-    pub fn last(&self, i: usize) -> Option<f64> {
-        let raw = (*self.last.get(i)?)?;
-        Some(self.table[i].to_units(raw))
-    }
-
-    fn push_write(&self, addr: u16, len: u8, value: i64, ctx: TickCtx, out: &mut Bounded<Request>) {
-        let op = Op::Write { addr, len, value };
-        let _ = out.push(Request::new(self.cred, op, ctx));
-    }
-}
-
-impl<T: ControlTable> Device for RegDevice<T> {
-    fn credential(&self) -> Credential {
-        self.cred
-    }
-
-    fn channels(&self) -> &[Channel] {
-        &self.channels
-    }
-
-    fn sample(&mut self, i: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
-        let Some(c) = self.table.get(i) else { return };
-        let Some(addr) = c.read else { return };
-        let _ = out.push(Request::new(self.cred, Op::Read { addr, len: c.len }, ctx));
-    }
-
-    fn write(&mut self, i: usize, value: f64, _ctx: TickCtx) {
-        let Some(c) = self.table.get(i) else { return };
-        if c.write.is_none() || !value.is_finite() {
-            return;
-        }
-        let raw = c.to_raw(value);
-        self.pending[i] = Some(raw);
-        self.family.on_raw(&mut self.table, i, raw);
-    }
-
-    fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
-        for i in 0..self.table.len() {
-            let Some(raw) = self.pending[i].take() else {
-                continue;
-            };
-            let c = self.table[i];
-            let Some(addr) = c.write else { continue };
-            self.push_write(addr, c.len, c.encode_raw(raw), ctx, out);
-        }
-    }
-
-    fn reply(&mut self, reply: &Reply, out: &mut Bounded<Update>) {
-        let fault = self.fault_tick == Some(reply.tick);
-        let (addr, len, value) = match reply.data {
-            ReplyData::Register { addr, len, value } => (addr, len, Some(value)),
-            ReplyData::Missing {
-                op: Op::Read { addr, len },
-            } => (addr, len, None),
-            ReplyData::DeviceError { .. } => {
-                self.device_errors += 1;
-                self.fault_tick = Some(reply.tick);
-                return;
-            }
-            _ => return,
-        };
-        for i in 0..self.table.len() {
-            let c = self.table[i];
-            if c.read != Some(addr) || c.len != len {
-                continue;
-            }
-            let units = match value.map(|bits| c.decode_raw(bits)) {
-                None => None,
-                Some(raw) if raw < c.read_range.0 || raw > c.read_range.1 => {
-                    self.range_rejects += 1;
-                    None
-                }
-                Some(raw) => {
-                    self.last[i] = Some(raw);
-                    self.family.on_raw(&mut self.table, i, raw);
-                    Some(c.to_units(raw))
-                }
-            };
-            let _ = out.push(Update::from_reply(reply, i, units, fault));
-        }
-    }
-
-    fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        match action {
-            SafeAction::Hold => match self.hold {
-                Some((i, goal)) if self.last[i].is_some() => {
-                    let raw = self.last[i].unwrap_or(0);
-                    let c = self.table[i];
-                    let value = c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1));
-                    self.push_write(goal, c.len, value, ctx, out);
-                }
-                // Nothing known to hold: the only safe thing left is to let go.
-                _ => self.safe(SafeAction::TorqueOff, ctx, out),
-            },
-            SafeAction::TorqueOff => {
-                if let Some((addr, len, value)) = T::TORQUE_OFF {
-                    self.push_write(addr, len, value, ctx, out);
-                }
-            }
-            SafeAction::Setpoint { channel, value } => {
-                self.pending.iter_mut().for_each(|p| *p = None);
-                self.write(channel, value, ctx);
-                self.flush(ctx, out);
-            }
-        }
+    /// Besides the goal position (channel [`HOLD`](Self::HOLD)): the goal register written 0
+    /// before enabling, in an operating mode whose goal is not a position (velocity, current,
+    /// PWM), as `(addr, len)`.
+    fn zero_goal(&self) -> Option<(u16, u8)> {
+        None
     }
 }
 

@@ -7,6 +7,8 @@
 use std::io;
 use std::os::unix::io::RawFd;
 
+use nix::errno::Errno;
+
 use crate::stage::HwError;
 
 /// Sets `O_NONBLOCK` on `fd`.
@@ -77,11 +79,13 @@ pub(crate) fn set_low_latency(_fd: RawFd) -> io::Result<()> {
     Err(io::Error::from(io::ErrorKind::Unsupported))
 }
 
-fn hw_error(e: io::Error) -> HwError {
-    match e.raw_os_error() {
-        // A pty whose other side closed, an unplugged USB adapter.
-        Some(libc::EIO) | Some(libc::ENXIO) | Some(libc::ENODEV) => HwError::Disconnected,
-        _ => HwError::Io(e.to_string()),
+/// The error of the last failed system call, as the link sees it: a vanished device (a pty
+/// whose other side closed, an unplugged USB adapter) is a disconnection, anything else an I/O
+/// error. Reads `errno` only: nothing is formatted or allocated on the real-time path.
+pub(crate) fn hw_error(e: Errno) -> HwError {
+    match e {
+        Errno::EIO | Errno::ENXIO | Errno::ENODEV | Errno::EBADF => HwError::Disconnected(Some(e)),
+        _ => HwError::Io(e),
     }
 }
 
@@ -98,13 +102,12 @@ pub(crate) fn read_nb(fd: RawFd, out: &mut [u8]) -> Result<usize, HwError> {
             return Ok(n as usize);
         }
         if n == 0 {
-            return Err(HwError::Disconnected);
+            return Err(HwError::Disconnected(None));
         }
-        let e = io::Error::last_os_error();
-        match e.kind() {
-            io::ErrorKind::WouldBlock => return Ok(0),
-            io::ErrorKind::Interrupted => continue,
-            _ => return Err(hw_error(e)),
+        match Errno::last() {
+            Errno::EAGAIN => return Ok(0),
+            Errno::EINTR => continue,
+            e => return Err(hw_error(e)),
         }
     }
 }
@@ -121,11 +124,10 @@ pub(crate) fn write_nb(fd: RawFd, data: &[u8]) -> Result<usize, HwError> {
         if n >= 0 {
             return Ok(n as usize);
         }
-        let e = io::Error::last_os_error();
-        match e.kind() {
-            io::ErrorKind::WouldBlock => return Ok(0),
-            io::ErrorKind::Interrupted => continue,
-            _ => return Err(hw_error(e)),
+        match Errno::last() {
+            Errno::EAGAIN => return Ok(0),
+            Errno::EINTR => continue,
+            e => return Err(hw_error(e)),
         }
     }
 }

@@ -25,5 +25,5 @@ mod udp;
 pub use memory::{mem_pipe, MemCanBus, MemCanPort, MemPort};
 pub use serial::{SerialHardware, SerialOptions};
 pub use slcan::{SlcanHardware, SlcanOptions, SlcanStats};
-pub use socketcan::{from_socketcan, to_socketcan, SocketCanHardware};
+pub use socketcan::{from_socketcan, interface_up, to_socketcan, SocketCanHardware};
 pub use udp::UdpHardware;

@@ -4,6 +4,19 @@
 //! Frames go out as `t…\r` lines; the adapter acknowledges each command with CR (or `z`/`Z`)
 //! or BEL, interleaved with the frames it received from the bus. Acknowledgements are matched
 //! to commands in order ([`PendingAcks`]); refused and unacknowledged frames are counted.
+//!
+//! * **Causality.** A frame the adapter reports before it acknowledged one of ours cannot be the
+//!   answer to it: every received frame carries how many of our frames were still unacknowledged
+//!   when its line arrived ([`Hardware::rx_unconfirmed`]), the fence the protocol stage matches
+//!   replies with. A stalled adapter that catches up (ack k, reply k, ack k+1, reply k+1) is
+//!   matched exactly.
+//! * **Flow control.** At most 64 frames go unacknowledged; more wait in the link. An adapter
+//!   that never acknowledges frames (some firmware does not) is detected after 8 acknowledgement
+//!   timeouts without a single acknowledgement, counted, and from then on not waited for.
+//! * **Urgent frames** (a safe action) are not held back by the window: [`Hardware::preempt`]
+//!   drops the lines not yet written (a half-written line is finished first).
+//! * **Timestamps** are accepted only if they were switched on (`Z1`, never sent here): a frame
+//!   line with 4 extra digits is malformed, never a timestamp.
 
 use std::time::{Duration, Instant};
 
@@ -14,7 +27,7 @@ use conductor_protocols::slcan::{
 };
 
 use crate::queue::Bounded;
-use crate::stage::{Hardware, HwError, TickCtx};
+use crate::stage::{Hardware, HwCounters, HwError, TickCtx};
 
 /// How to talk to the adapter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,6 +68,8 @@ pub struct SlcanStats {
     pub stray_acks: u64,
     /// Bytes from the adapter that were not a valid line.
     pub discarded_bytes: u64,
+    /// The adapter does not acknowledge frames: acknowledgements are no longer waited for.
+    pub no_acks: bool,
 }
 
 /// Why the adapter could not be opened.
@@ -78,6 +93,11 @@ pub enum SlcanOpenError {
 const ACK_WINDOW: usize = 64;
 /// Bytes read from the transport per call.
 const RX_CHUNK: usize = 512;
+/// Received frames buffered.
+const RX_FRAMES: usize = 256;
+/// Acknowledgement timeouts without any acknowledgement before the adapter counts as one that
+/// does not acknowledge frames.
+const NO_ACK_AFTER: u64 = 8;
 
 /// An SLCAN adapter on byte transport `B`.
 pub struct SlcanHardware<B: Hardware<Word = u8>> {
@@ -87,10 +107,20 @@ pub struct SlcanHardware<B: Hardware<Word = u8>> {
     acks: PendingAcks<ACK_WINDOW>,
     /// Encoded lines not yet accepted by the transport.
     tx: Bounded<u8>,
-    /// Frames decoded but not yet handed out.
+    /// Frames decoded but not yet handed out, with the number of our frames still
+    /// unacknowledged when each arrived.
     rx: Bounded<CanFrame>,
+    rx_behind: Bounded<u32>,
+    /// The unacknowledged counts of the frames the last `receive` returned.
+    out_behind: [u32; RX_FRAMES],
+    out_n: usize,
     rx_chunk: [u8; RX_CHUNK],
     stats: SlcanStats,
+    acks_seen: u64,
+    /// Bytes of the first line in `tx` already written (a half-sent line).
+    head_written: usize,
+    /// The next frames bypass the acknowledgement window (a safe action).
+    urgent: bool,
     t0: Instant,
 }
 
@@ -145,14 +175,21 @@ impl<B: Hardware<Word = u8>> SlcanHardware<B> {
             opts,
             scanner,
             acks: PendingAcks::new(),
-            tx: Bounded::with_capacity(ACK_WINDOW * MAX_FRAME_LINE),
-            rx: Bounded::with_capacity(256),
+            tx: Bounded::with_capacity(2 * ACK_WINDOW * MAX_FRAME_LINE),
+            rx: Bounded::with_capacity(RX_FRAMES),
+            rx_behind: Bounded::with_capacity(RX_FRAMES),
+            out_behind: [0; RX_FRAMES],
+            out_n: 0,
             rx_chunk: [0; RX_CHUNK],
             stats: SlcanStats::default(),
+            acks_seen: 0,
+            head_written: 0,
+            urgent: false,
             t0,
         };
         for f in rx.as_slice() {
             let _ = hw.rx.push(*f);
+            let _ = hw.rx_behind.push(0);
         }
         Ok(hw)
     }
@@ -178,6 +215,11 @@ impl<B: Hardware<Word = u8>> SlcanHardware<B> {
     fn flush_tx(&mut self, ctx: TickCtx) -> Result<(), HwError> {
         if !self.tx.is_empty() {
             let n = self.port.transmit(self.tx.as_slice(), ctx)?;
+            // Where the (new) head line starts: after the last CR written.
+            match self.tx.as_slice()[..n].iter().rposition(|&b| b == CR) {
+                Some(i) => self.head_written = n - i - 1,
+                None => self.head_written += n,
+            }
             self.tx.consume(n);
         }
         Ok(())
@@ -193,8 +235,19 @@ impl<B: Hardware<Word = u8>> SlcanHardware<B> {
             self.acks.pop();
             self.stats.ack_timeouts += 1;
         }
+        if !self.stats.no_acks && self.acks_seen == 0 && self.stats.ack_timeouts >= NO_ACK_AFTER {
+            self.stats.no_acks = true;
+            self.acks.clear();
+        }
+    }
+
+    /// Whether the adapter does not acknowledge frames (detected, see the module docs).
+    pub fn no_acks(&self) -> bool {
+        self.stats.no_acks
     }
 }
+
+const CR: u8 = b'\r';
 
 impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
     type Word = CanFrame;
@@ -208,13 +261,20 @@ impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
             let Ok(n) = Command::Transmit(*f).encode(&self.opts.dialect, &mut line) else {
                 break;
             };
-            if self.tx.remaining() < n || self.acks.len() == ACK_WINDOW {
+            let window_full = self.acks.len() == ACK_WINDOW && !self.urgent;
+            if self.tx.remaining() < n || window_full {
                 break;
             }
             self.tx.extend_from_slice(&line[..n]);
-            let _ = self.acks.push(CommandKind::Transmit, now);
+            if !self.stats.no_acks && self.acks.push(CommandKind::Transmit, now).is_err() {
+                // Past the window (urgent): its acknowledgement cannot be tracked; the oldest
+                // expectation goes instead, so the later ones stay in order.
+                self.acks.pop();
+                let _ = self.acks.push(CommandKind::Transmit, now);
+            }
             accepted += 1;
         }
+        self.urgent = false;
         self.stats.frames_out += accepted as u64;
         self.flush_tx(ctx)?;
         Ok(accepted)
@@ -231,18 +291,26 @@ impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
                 scanner,
                 acks,
                 rx,
+                rx_behind,
                 stats,
                 rx_chunk,
+                acks_seen,
                 ..
             } = self;
             scanner.feed(&rx_chunk[..k], |r| match r {
                 Response::Frame { frame, .. } => {
                     stats.frames_in += 1;
-                    let _ = rx.push(frame);
+                    if rx.push(frame).is_ok() {
+                        let _ = rx_behind.push(acks.len() as u32);
+                    }
                 }
                 other => match acks.resolve(&other) {
-                    Some(a) if !a.ok => stats.nacks += 1,
-                    Some(_) => {}
+                    Some(a) => {
+                        *acks_seen += 1;
+                        if !a.ok {
+                            stats.nacks += 1;
+                        }
+                    }
                     None if matches!(
                         other,
                         Response::Ok | Response::Error | Response::TxAck { .. }
@@ -258,12 +326,66 @@ impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
             }
         }
         self.expire_acks();
-        Ok(self.rx.pop_into(out))
+        let n = self.rx.pop_into(out);
+        self.out_n = self.rx_behind.pop_into(&mut self.out_behind[..n]);
+        Ok(n)
+    }
+
+    fn rx_unconfirmed(&self) -> &[u32] {
+        &self.out_behind[..self.out_n]
+    }
+
+    fn preempt(&mut self) {
+        // Keep the rest of a half-written line (the adapter would misparse the next one).
+        let keep = if self.head_written > 0 {
+            self.tx
+                .as_slice()
+                .iter()
+                .position(|&b| b == CR)
+                .map_or(self.tx.len(), |i| i + 1)
+        } else {
+            0
+        };
+        let dropped = self.tx.as_slice()[keep..]
+            .iter()
+            .filter(|&&b| b == CR)
+            .count();
+        for _ in 0..dropped {
+            // Their acknowledgements will never come.
+            self.acks.pop_back();
+        }
+        let n = self.tx.len() - keep;
+        for _ in 0..n {
+            self.tx.pop_back();
+        }
+        self.urgent = true;
+    }
+
+    fn flushed(&self) -> bool {
+        self.tx.is_empty() && (self.acks.is_empty() || self.stats.no_acks)
+    }
+
+    fn counters(&self) -> HwCounters {
+        HwCounters {
+            nacks: self.stats.nacks,
+            ack_timeouts: self.stats.ack_timeouts,
+            error_frames: 0,
+            discarded: self.scanner.stats().discarded_bytes(),
+        }
     }
 
     fn shutdown(&mut self) {
         let ctx = TickCtx { tick: 0, now_ns: 0 };
-        let _ = self.flush_tx(ctx);
+        // Everything queued goes out and is acknowledged first (bounded), then the channel
+        // closes: closing with frames still queued would drop them.
+        let until = Instant::now() + Duration::from_millis(200);
+        let mut sink = [CanFrame::standard(0, &[]).expect("an empty frame"); 16];
+        while !self.flushed() && Instant::now() < until {
+            if self.flush_tx(ctx).is_err() || self.receive(&mut sink, ctx).is_err() {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
         let mut close = [0u8; 4];
         if let Ok(n) = Command::Close.encode(&self.opts.dialect, &mut close) {
             let _ = self.port.transmit(&close[..n], ctx);

@@ -5,7 +5,9 @@ use std::io;
 use conductor_protocols::can::CanFrame;
 use socketcan::{CanSocket, EmbeddedFrame, Socket};
 
-use crate::stage::{Hardware, HwError, TickCtx};
+use nix::errno::Errno;
+
+use crate::stage::{Hardware, HwCounters, HwError, TickCtx};
 
 /// Converts to socketcan's frame type (for transmission).
 pub fn to_socketcan(f: &CanFrame) -> socketcan::CanFrame {
@@ -68,10 +70,23 @@ impl SocketCanHardware {
     }
 }
 
+/// The interface vanished (`ENODEV`, `ENXIO`: a USB-CAN adapter unplugged, the interface
+/// deleted) or went down (`ENETDOWN`): a disconnection, reopened by the link; anything else is
+/// an I/O error. OS errors carry their number; io::Error builds no text for them.
+/// Whether interface `name` exists and is up (`IFF_UP` in `/sys/class/net/<name>/flags`).
+pub fn interface_up(name: &str) -> bool {
+    let path = format!("/sys/class/net/{name}/flags");
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|f| u32::from_str_radix(f.trim().trim_start_matches("0x"), 16).ok())
+        .is_some_and(|flags| flags & libc::IFF_UP as u32 != 0)
+}
+
 fn hw_error(e: io::Error) -> HwError {
-    match e.raw_os_error() {
-        Some(libc::ENODEV) | Some(libc::ENETDOWN) => HwError::Disconnected,
-        _ => HwError::Io(e.to_string()),
+    let errno = Errno::from_raw(e.raw_os_error().unwrap_or(libc::EIO));
+    match errno {
+        Errno::ENODEV | Errno::ENXIO | Errno::ENETDOWN => HwError::Disconnected(Some(errno)),
+        _ => HwError::Io(errno),
     }
 }
 
@@ -108,6 +123,13 @@ impl Hardware for SocketCanHardware {
             }
         }
         Ok(n)
+    }
+
+    fn counters(&self) -> HwCounters {
+        HwCounters {
+            error_frames: self.error_frames,
+            ..HwCounters::default()
+        }
     }
 }
 

@@ -53,7 +53,8 @@ impl UdpHardware {
 }
 
 fn hw_error(e: io::Error) -> HwError {
-    HwError::Io(e.to_string())
+    // OS errors carry their number; io::Error builds no text for them.
+    HwError::Io(nix::errno::Errno::from_raw(e.raw_os_error().unwrap_or(libc::EIO)))
 }
 
 impl Hardware for UdpHardware {

@@ -146,13 +146,13 @@ impl CanMotorProtocol {
         }
     }
 
-    fn on_frame(&mut self, f: &CanFrame, ctx: TickCtx, out: &mut Bounded<Reply>) {
+    fn on_frame(&mut self, f: &CanFrame, fence: u64, ctx: TickCtx, out: &mut Bounded<Reply>) {
         // MIT reply: from the master ID, motor ID in data[0].
         if f.id() == Id::Standard(self.master) && !f.is_remote_frame() && matches!(f.dlc(), 6 | 8) {
             let motor = f.data()[0];
             let cred = Credential::id(motor as u32);
             let is_mit = |op: &Op| matches!(op, Op::Mit { .. } | Op::MitSpecial(_));
-            if let Some(p) = self.pending.resolve(cred, is_mit) {
+            if let Some(p) = self.pending.resolve(cred, fence, is_mit) {
                 let l = self.limits_of(motor);
                 match mit_can::Reply::decode(f.data(), &l) {
                     Ok(rep) => {
@@ -167,6 +167,7 @@ impl CanMotorProtocol {
                             p: rep.p,
                             v: rep.v,
                             t: rep.t,
+                            temperature: rep.extra.map(|e| e.temperature),
                         }));
                     }
                     Err(_) => {
@@ -176,27 +177,36 @@ impl CanMotorProtocol {
                 }
                 return;
             }
+            if self.pending.resolve_late(cred, is_mit) {
+                // The answer to a request already reported missing: its time is unknown.
+                self.counters.late_replies += 1;
+                return;
+            }
         }
         match odrive_can::decode_frame(f) {
             Ok((node, msg)) => {
                 let cred = Credential::id(node as u32);
                 let cmd = msg.cmd_id();
-                let asked = self
-                    .pending
-                    .resolve(cred, |op| matches!(op, Op::Odrive(m) if m.cmd_id() == cmd));
+                let same = |op: &Op| matches!(op, Op::Odrive(m) if m.cmd_id() == cmd);
+                let asked = self.pending.resolve(cred, fence, same);
+                if asked.is_none() && self.pending.resolve_late(cred, same) {
+                    self.counters.late_replies += 1;
+                    return;
+                }
                 self.counters.packets_in += 1;
                 // Cyclic messages (heartbeat, encoder estimates) arrive unasked: they are
                 // sampled when received.
-                let (tick, t_sample_ns) = match asked {
-                    Some(p) => (p.tick, p.t_request_ns),
-                    None => (ctx.tick, ctx.now_ns),
+                let reply = match asked {
+                    Some(p) => p.reply(ReplyData::Odrive(msg)),
+                    None => Reply {
+                        cred,
+                        data: ReplyData::Odrive(msg),
+                        op: None,
+                        tick: ctx.tick,
+                        t_sample_ns: ctx.now_ns,
+                    },
                 };
-                let _ = out.push(Reply {
-                    cred,
-                    data: ReplyData::Odrive(msg),
-                    tick,
-                    t_sample_ns,
-                });
+                let _ = out.push(reply);
             }
             Err(_) => self.unsolicited += 1,
         }
@@ -205,6 +215,8 @@ impl CanMotorProtocol {
 
 impl Protocol for CanMotorProtocol {
     type Word = CanFrame;
+    // A motor's command of this tick supersedes the one of an earlier tick still unsent.
+    const SUPERSEDES_UNSENT: bool = true;
 
     fn encode(&mut self, requests: &[Request], out: &mut Bounded<CanFrame>, ctx: TickCtx) {
         for r in requests {
@@ -212,32 +224,34 @@ impl Protocol for CanMotorProtocol {
                 self.counters.dropped_requests += 1;
                 continue;
             };
-            if answered
-                && !self
-                    .pending
-                    .track(Pending::new(r, ctx.now_ns + self.timeout_ns))
-            {
-                self.counters.dropped_requests += 1;
-                continue;
-            }
             if out.push(frame).is_err() {
                 self.counters.dropped_requests += 1;
-                if answered {
-                    // Forget it again: it never went out.
-                    let op = r.op;
-                    let _ = self.pending.resolve(r.cred, |o| *o == op);
-                }
                 continue;
             }
             self.counters.packets_out += 1;
             self.counters.words_out += 1;
+            let end_pos = self.counters.words_out;
+            if answered
+                && !self
+                    .pending
+                    .track(Pending::new(r, ctx.now_ns + self.timeout_ns, end_pos))
+            {
+                // It goes out, but its answer cannot be told apart: counted, left unmatched.
+                self.counters.dropped_requests += 1;
+            }
         }
     }
 
-    fn decode(&mut self, words: &[CanFrame], out: &mut Bounded<Reply>, ctx: TickCtx) {
-        for f in words {
+    fn decode(
+        &mut self,
+        words: &[CanFrame],
+        fence: &[u64],
+        out: &mut Bounded<Reply>,
+        ctx: TickCtx,
+    ) {
+        for (i, f) in words.iter().enumerate() {
             self.counters.words_in += 1;
-            self.on_frame(f, ctx, out);
+            self.on_frame(f, fence.get(i).copied().unwrap_or(u64::MAX), ctx, out);
         }
     }
 
@@ -249,6 +263,18 @@ impl Protocol for CanMotorProtocol {
         let mut c = self.counters;
         c.rejected_packets += self.unsolicited;
         c
+    }
+
+    fn reset(&mut self, out: &mut Bounded<Reply>) {
+        self.counters.missing_replies += self.pending.drain_missing(out);
+    }
+
+    fn preempt(&mut self) {
+        // Requests become frames at once: nothing is queued here (the link drops unsent frames).
+    }
+
+    fn discard_unsent(&mut self, from: u64) {
+        self.counters.dropped_requests += self.pending.forget_from(from);
     }
 }
 

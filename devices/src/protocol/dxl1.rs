@@ -66,6 +66,9 @@ impl Dialect for Dxl1 {
         self.mode == Dxl1ReadMode::Single
     }
 
+    // A 1.0 PING status carries no data (the model number is read at address 0).
+    const PING_LEN: u16 = 0;
+
     fn sync_write(
         &mut self,
         buf: &mut [u8],
@@ -78,7 +81,21 @@ impl Dialect for Dxl1 {
         dxl::sync_write(buf, addr, len, values.iter().map(|(id, b)| (*id, &b[..l]))).ok()
     }
 
-    fn read(&mut self, buf: &mut [u8], entries: &[Entry], _shape: ReadShape) -> Option<ReadTxn> {
+    fn read(&mut self, buf: &mut [u8], entries: &[Entry], shape: ReadShape) -> Option<ReadTxn> {
+        match shape {
+            ReadShape::Ping => {
+                let e = entries.first()?;
+                return Some(ReadTxn {
+                    bytes: dxl::ping(buf, e.id).ok()?,
+                    fast: false,
+                    reply_bytes: 6,
+                    replies: 1,
+                });
+            }
+            // Protocol 1.0 has no REBOOT (its RESET is a factory reset).
+            ReadShape::Reboot => return None,
+            ReadShape::Uniform | ReadShape::Mixed => {}
+        }
         let fits = entries
             .iter()
             .all(|e| e.addr <= 255 && e.len <= 255 && e.len > 0);
@@ -108,14 +125,14 @@ impl Dialect for Dxl1 {
         })
     }
 
-    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, out: &mut Bounded<Reply>) {
+    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, fence: u64, out: &mut Bounded<Reply>) {
         let s = Status::from_packet(&p);
         let err = StatusErr {
             failed: s.error.0 & FAILED != 0,
             alert: s.error.0 & !FAILED != 0,
             code: s.error.0,
         };
-        core.on_status(s.id, err, s.data, out);
+        core.on_status(s.id, err, s.data, fence, out);
     }
 }
 
@@ -190,7 +207,7 @@ mod tests {
         let mut wire = status(1, 0, &[0x00, 0x02]);
         // Servo 2 is overloaded: an alarm bit, the data still valid.
         wire.extend(status(2, ErrorBits::OVERLOAD, &[0x10, 0x01]));
-        p.decode(&wire, &mut replies, ctx(1));
+        p.decode(&wire, &[], &mut replies, ctx(1));
         p.expire(&mut replies, ctx(1));
         let r = replies.as_slice();
         assert_eq!(r.len(), 3, "{r:?}");
@@ -235,7 +252,7 @@ mod tests {
         p.encode(&reads, &mut out, ctx(0));
         let (pk, _) = dxl::parse(out.as_slice()).unwrap();
         assert_eq!((pk.id, pk.code, pk.params), (1, 0x02, &[36u8, 2][..]));
-        p.decode(&status(1, 0, &[1, 0]), &mut replies, ctx(1));
+        p.decode(&status(1, 0, &[1, 0]), &[], &mut replies, ctx(1));
         p.expire(&mut replies, ctx(1));
         assert_eq!(replies.len(), 1);
         // Next window: servo 2, whose request waited (no new requests needed).

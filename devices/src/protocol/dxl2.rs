@@ -103,6 +103,9 @@ impl Dialect for Dxl2 {
         false
     }
 
+    // Model number (2) and firmware version (1).
+    const PING_LEN: u16 = 3;
+
     fn sync_write(
         &mut self,
         buf: &mut [u8],
@@ -117,6 +120,19 @@ impl Dialect for Dxl2 {
 
     fn read(&mut self, buf: &mut [u8], entries: &[Entry], shape: ReadShape) -> Option<ReadTxn> {
         let fast = self.mode == Dxl2ReadMode::Fast;
+        if let ReadShape::Ping | ReadShape::Reboot = shape {
+            let e = entries.first()?;
+            let (bytes, data) = match shape {
+                ReadShape::Ping => (dxl::ping(buf, e.id).ok()?, Self::PING_LEN as usize),
+                _ => (dxl::reboot(buf, e.id).ok()?, 0),
+            };
+            return Some(ReadTxn {
+                bytes,
+                fast: false,
+                reply_bytes: dxl::status_len(data),
+                replies: 1,
+            });
+        }
         let bytes = match shape {
             ReadShape::Uniform => {
                 let first = entries.first()?;
@@ -128,7 +144,7 @@ impl Dialect for Dxl2 {
                     dxl::sync_read(buf, first.addr, first.len, &self.ids)
                 }
             }
-            ReadShape::Mixed => {
+            ReadShape::Mixed | ReadShape::Ping | ReadShape::Reboot => {
                 self.bulk.clear();
                 self.bulk.extend(entries.iter().map(|e| BulkReadEntry {
                     id: e.id,
@@ -159,7 +175,7 @@ impl Dialect for Dxl2 {
         })
     }
 
-    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, out: &mut Bounded<Reply>) {
+    fn on_packet(&mut self, core: &mut Core, p: Packet<'_>, fence: u64, out: &mut Bounded<Reply>) {
         if !p.is_status() {
             // An instruction packet: the echo of an adapter that hears itself. Not ours to answer.
             return;
@@ -169,13 +185,13 @@ impl Dialect for Dxl2 {
                 core.counters.rejected_packets += 1;
                 return;
             };
-            if !core.fast_lens(&mut self.lens) {
+            if !core.fast_lens(fence, &mut self.lens) {
                 core.unsolicited += 1;
                 return;
             }
             for s in fr.slices(self.lens.iter().copied()) {
                 match s {
-                    Ok(s) => core.on_status(s.id, status_err(s.error), s.data, out),
+                    Ok(s) => core.on_status(s.id, status_err(s.error), s.data, fence, out),
                     Err(_) => {
                         // The slices after a bad embedded CRC cannot be trusted; their requests
                         // expire as missing.
@@ -187,7 +203,7 @@ impl Dialect for Dxl2 {
             return;
         }
         match Status::from_packet(&p) {
-            Ok(s) => core.on_status(s.id, status_err(s.error), s.data, out),
+            Ok(s) => core.on_status(s.id, status_err(s.error), s.data, fence, out),
             Err(_) => core.counters.rejected_packets += 1,
         }
     }
@@ -220,8 +236,8 @@ mod tests {
         }
     }
 
-    /// Ticks faster than the bus: while the previous transaction is on the wire nothing is
-    /// sent, and the requests that pile up are coalesced (latest goal wins, one read).
+    /// Ticks faster than the bus: while the previous transaction's replies may still come
+    /// nothing is sent, and the requests that pile up are coalesced (latest goal wins, one read).
     #[test]
     fn busy_bus_defers_and_coalesces() {
         let mut p = Dxl2Protocol::new(timing(), Dxl2ReadMode::Sync, 2, 16);
@@ -244,10 +260,20 @@ mod tests {
         // 0.1 ms later: the read's reply (15 bytes, 0.15 ms at 1 Mbit/s) is still due.
         p.encode(&[goal(200, 1), read(1)], &mut out, ctx(1));
         p.encode(&[goal(300, 2), read(2)], &mut out, ctx(2));
-        assert_eq!(out.len(), first, "nothing sent while the bus is busy");
-        // Later: one SYNC WRITE carrying the newest goal, one SYNC READ.
-        out.clear();
+        // Past the reply's expected end, but it has not come: it may still (until the deadline,
+        // expected end + 1 ms timeout), and a packet now would collide with it.
         p.encode(&[], &mut out, ctx(10));
+        assert_eq!(out.len(), first, "nothing sent while a reply may still come");
+        // The deadline passes with the reply missing: the line must then stay quiet for one
+        // more timeout, so that a late reply is not taken for the next transaction's.
+        let mut replies = Bounded::with_capacity(8);
+        p.expire(&mut replies, ctx(14));
+        assert!(matches!(replies.as_slice(), [r] if matches!(r.data, ReplyData::Missing { .. })));
+        p.encode(&[], &mut out, ctx(20));
+        assert_eq!(out.len(), first, "quiet guard after missing replies");
+        // Then: one SYNC WRITE carrying the newest goal, one SYNC READ.
+        out.clear();
+        p.encode(&[], &mut out, ctx(25));
         let mut buf = out.as_slice().to_vec();
         let pk = conductor_protocols::dynamixel2::parse_in_place(&mut buf).unwrap();
         assert_eq!(pk.instruction, 0x83);

@@ -1,18 +1,31 @@
 //! The machinery shared by the register-mapped UART protocols (Dynamixel 2.0 and 1.0): what
-//! devices want read and written, the read transactions in flight on the half-duplex bus, and
-//! matching status packets back to the requests that caused them.
+//! devices want read and written, the transactions on the half-duplex bus, and matching status
+//! packets back to the requests that caused them.
 //!
-//! * Requests that arrive while the bus is still busy with the previous transaction stay
-//!   queued (the thesis' tick cache) and are **coalesced**: a newer write to the same register
-//!   replaces the older one; repeated reads of the same register share one bus read, and every
-//!   one of them is answered (by its value, or `Missing`). When more reads pile up than the
-//!   stage has room for, the excess is answered `Missing` at once and counted as dropped.
-//! * A transaction is one read instruction (SYNC/FAST SYNC/BULK/FAST BULK READ, or a single
-//!   READ) and the status packets it expects. Status packets arrive in wire order, so a reply
-//!   for a newer transaction closes the older ones: what they still lacked is missing.
-//! * Each transaction has a deadline from the wire time at the configured baud, the servos'
-//!   return delay and a timeout margin; what has not arrived then is reported
-//!   [`ReplyData::Missing`] and counted, never invented.
+//! * Requests that arrive while the bus is busy stay queued (the thesis' tick cache) and are
+//!   **coalesced**: a newer write to the same register replaces the older one; repeated reads of
+//!   the same register share one bus read, and every one of them is answered (by its value, or
+//!   `Missing`). When more reads pile up than the stage has room for, the excess is answered
+//!   `Missing` at once and counted as dropped.
+//! * A transaction is one instruction that expects status packets: a read (SYNC/FAST SYNC/BULK/
+//!   FAST BULK READ, or a single READ), a PING or a REBOOT. Status packets arrive in wire order,
+//!   so a reply for a newer transaction closes the older ones.
+//! * **One transaction on the bus at a time.** Nothing is sent (no write either, it would
+//!   collide with a reply) while a transaction's replies may still come: until they have all
+//!   been decoded (the link decodes what arrived before it encodes) or its deadline (expected
+//!   end from the wire time at the configured baud and the return delays, plus the timeout) has
+//!   passed. When replies were missing at the deadline, the line must also have been quiet for
+//!   one more timeout before the next transaction, so a late reply cannot be taken for the
+//!   answer to the next one.
+//! * **Late replies are counted and dropped.** At its deadline a transaction's unanswered
+//!   requests are reported [`ReplyData::Missing`] (never invented), but the transaction stays
+//!   matchable until the next one starts: a status packet that comes meanwhile is a late reply,
+//!   counted in `late_replies` and never delivered with a wrong sample time, and it keeps the
+//!   line from counting as quiet. A reply also never answers a transaction whose instruction was
+//!   not on the wire before it arrived (the link's fence). What remains: a reply later than the
+//!   timeout plus the quiet guard that arrives after the next instruction was sent cannot be
+//!   told from that instruction's answer (a status packet carries no sequence number); the
+//!   timeout must cover the adapter's latency (see `timeout_us`).
 
 use crate::message::{Credential, Op, Reply, ReplyData, Request};
 use crate::queue::Bounded;
@@ -34,10 +47,22 @@ pub struct Timing {
     pub timeout_ns: u64,
 }
 
-/// One read request waiting for its value.
+/// What a transaction asks a device.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Ask {
+    /// Read `len` bytes at `addr`.
+    Read,
+    /// PING (model number and firmware where the protocol returns them).
+    Ping,
+    /// REBOOT.
+    Reboot,
+}
+
+/// One request waiting for its answer.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Waiter {
     pub cred: Credential,
+    pub ask: Ask,
     pub addr: u16,
     pub len: u8,
     pub tick: u64,
@@ -46,9 +71,13 @@ pub(crate) struct Waiter {
 
 impl Waiter {
     fn op(&self) -> Op {
-        Op::Read {
-            addr: self.addr,
-            len: self.len,
+        match self.ask {
+            Ask::Read => Op::Read {
+                addr: self.addr,
+                len: self.len,
+            },
+            Ask::Ping => Op::Ping,
+            Ask::Reboot => Op::Reboot,
         }
     }
 
@@ -56,14 +85,9 @@ impl Waiter {
         self.addr + self.len as u16
     }
 
-    /// The answer that this read went unanswered.
+    /// The answer that this request went unanswered.
     fn missing(&self) -> Reply {
-        Reply {
-            cred: self.cred,
-            data: ReplyData::Missing { op: self.op() },
-            tick: self.tick,
-            t_sample_ns: self.t_request_ns,
-        }
+        Reply::missing(self.cred, self.op(), self.tick, self.t_request_ns)
     }
 }
 
@@ -76,11 +100,12 @@ pub(crate) struct WriteReq {
     pub value: i64,
 }
 
-/// One device's part of a read transaction.
+/// One device's part of a transaction.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Entry {
     pub id: u8,
     pub addr: u16,
+    /// Data bytes its status packet carries.
     pub len: u16,
     done: bool,
 }
@@ -96,73 +121,97 @@ pub(crate) struct StatusErr {
     pub code: u8,
 }
 
-/// The read instruction a transaction sends.
+/// The instruction a transaction sends.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum ReadShape {
-    /// Every entry has the same address and length.
+    /// A read; every entry has the same address and length.
     Uniform,
-    /// Entries differ (bulk read).
+    /// A read whose entries differ (bulk read).
     Mixed,
+    /// A PING to one device.
+    Ping,
+    /// A REBOOT of one device.
+    Reboot,
 }
 
 #[derive(Debug)]
 struct Txn {
     active: bool,
+    /// Past its deadline: its missing requests were reported; what still comes is late.
+    expired: bool,
     seq: u64,
     fast: bool,
     deadline_ns: u64,
     t_sent_ns: u64,
+    /// Stream position just after its instruction: replies with a lower fence predate it.
+    end_pos: u64,
     entries: Vec<Entry>,
     /// (entry index, waiter).
     waiters: Vec<(usize, Waiter)>,
 }
 
-/// Most transactions open at once (sent, replies not all decoded). On a half-duplex bus a new
-/// one starts only after the previous one's expected end, so two are typical.
-const TXNS: usize = 4;
+/// Most transactions tracked at once: the one on the bus and the expired ones whose late replies
+/// may still come.
+const TXNS: usize = 8;
+/// An expired transaction is forgotten once the line has been silent this long (ns).
+const FORGET_QUIET_NS: u64 = 100_000_000;
 
 /// The shared state of a register-bus protocol stage.
 #[derive(Debug)]
 pub(crate) struct Core {
     timing: Timing,
     max_id: u8,
+    /// Data bytes of a PING status packet (3 in 2.0: model and firmware; 0 in 1.0).
+    ping_len: u16,
     want_reads: Bounded<Waiter>,
+    /// Pings and reboots, one per transaction.
+    want_specials: Bounded<Waiter>,
     want_writes: Bounded<WriteReq>,
     /// Replies decided at encode time (requests that cannot be sent), handed out at expire.
     early: Bounded<Reply>,
     txns: Vec<Txn>,
     next_seq: u64,
     bus_free_at: u64,
+    /// After missing replies: nothing is sent before the line has been quiet until then.
+    quiet_until: u64,
+    last_rx_ns: u64,
     rr: u8,
     pub counters: ProtocolCounters,
-    /// Valid status packets nobody was waiting for (late, duplicated or foreign).
+    /// Valid status packets nobody was waiting for (duplicated or foreign).
     pub unsolicited: u64,
 }
 
 impl Core {
-    /// Room for `devices` devices and `in_flight` read requests.
-    pub fn new(timing: Timing, max_id: u8, devices: usize, in_flight: usize) -> Self {
+    /// Room for `devices` devices and `in_flight` read requests; a PING's status carries
+    /// `ping_len` data bytes.
+    pub fn new(timing: Timing, max_id: u8, devices: usize, in_flight: usize, ping_len: u16) -> Self {
         let devices = devices.max(1);
         let in_flight = in_flight.max(devices);
         Self {
             timing,
             max_id,
+            ping_len,
             want_reads: Bounded::with_capacity(in_flight),
+            want_specials: Bounded::with_capacity(2 * devices),
             want_writes: Bounded::with_capacity(in_flight),
-            early: Bounded::with_capacity(in_flight),
+            early: Bounded::with_capacity(in_flight + 2 * devices),
             txns: (0..TXNS)
                 .map(|_| Txn {
                     active: false,
+                    expired: false,
                     seq: 0,
                     fast: false,
                     deadline_ns: 0,
                     t_sent_ns: 0,
+                    end_pos: 0,
                     entries: Vec::with_capacity(devices),
                     waiters: Vec::with_capacity(in_flight),
                 })
                 .collect(),
             next_seq: 0,
             bus_free_at: 0,
+            quiet_until: 0,
+            last_rx_ns: 0,
             rr: 0,
             counters: ProtocolCounters::default(),
             unsolicited: 0,
@@ -180,18 +229,29 @@ impl Core {
                 self.refuse(r);
                 continue;
             }
+            let waiter = |ask, addr, len| Waiter {
+                cred: r.cred,
+                ask,
+                addr,
+                len,
+                tick: r.tick,
+                t_request_ns: r.t_request_ns,
+            };
             match r.op {
                 Op::Read { addr, len } if len > 0 && addr.checked_add(len as u16).is_some() => {
                     // A read of a register already queued shares its bus read: both requests
                     // are answered by the one value (it is kept as its own waiter).
-                    let w = Waiter {
-                        cred: r.cred,
-                        addr,
-                        len,
-                        tick: r.tick,
-                        t_request_ns: r.t_request_ns,
+                    if self.want_reads.push(waiter(Ask::Read, addr, len)).is_err() {
+                        self.refuse(r);
+                    }
+                }
+                Op::Ping | Op::Reboot => {
+                    let ask = if r.op == Op::Ping {
+                        Ask::Ping
+                    } else {
+                        Ask::Reboot
                     };
-                    if self.want_reads.push(w).is_err() {
+                    if self.want_specials.push(waiter(ask, 0, 0)).is_err() {
                         self.refuse(r);
                     }
                 }
@@ -224,23 +284,24 @@ impl Core {
     /// A request this bus cannot carry: counted; a read is answered `Missing` at expire.
     fn refuse(&mut self, r: &Request) {
         self.counters.dropped_requests += 1;
-        if matches!(r.op, Op::Read { .. }) {
-            let _ = self.early.push(Reply {
-                cred: r.cred,
-                data: ReplyData::Missing { op: r.op },
-                tick: r.tick,
-                t_sample_ns: r.t_request_ns,
-            });
+        if matches!(r.op, Op::Read { .. } | Op::Ping | Op::Reboot) {
+            let _ = self
+                .early
+                .push(Reply::missing(r.cred, r.op, r.tick, r.t_request_ns));
         }
     }
 
-    /// Whether the previous transaction's replies should be off the wire by `now`.
+    /// Whether the bus is free at `now`: the previous transaction's replies are all in (or it
+    /// expired and the line has been quiet since), and a table slot is free.
     pub fn bus_free(&self, now_ns: u64) -> bool {
         now_ns >= self.bus_free_at
+            && now_ns >= self.quiet_until
+            && !self.txns.iter().any(|x| x.active && !x.expired)
+            && self.txns.iter().any(|x| !x.active)
     }
 
     pub fn has_work(&self) -> bool {
-        !self.want_reads.is_empty() || !self.want_writes.is_empty()
+        !self.want_reads.is_empty() || !self.want_writes.is_empty() || !self.want_specials.is_empty()
     }
 
     /// Takes the queued writes with the same address and length as the first one, into
@@ -266,12 +327,26 @@ impl Core {
         self.counters.dropped_requests += n as u64;
     }
 
-    /// Plans the next read transaction: the devices with queued reads (only one, round robin,
-    /// when `single`), each reading the smallest span covering its requests. Fills `entries`
-    /// and returns the shape, or `None` when nothing is to be read.
+    /// Plans the next transaction: a queued PING or REBOOT first (one device), else a read of
+    /// the devices with queued reads (only one, round robin, when `single`), each reading the
+    /// smallest span covering its requests. Fills `entries` and returns the shape, or `None`
+    /// when nothing is to be asked.
     pub fn plan_reads(&mut self, single: bool, entries: &mut Vec<Entry>) -> Option<ReadShape> {
         entries.clear();
         let cap = entries.capacity();
+        if let Some(w) = self.want_specials.as_slice().first() {
+            let (len, shape) = match w.ask {
+                Ask::Ping => (self.ping_len, ReadShape::Ping),
+                _ => (0, ReadShape::Reboot),
+            };
+            entries.push(Entry {
+                id: w.cred.id as u8,
+                addr: 0,
+                len,
+                done: false,
+            });
+            return Some(shape);
+        }
         if single {
             // The queued device with the smallest ID at or after the cursor, wrapping.
             let ids = self.want_reads.as_slice().iter().map(|w| w.cred.id as u8);
@@ -328,19 +403,24 @@ impl Core {
         }
     }
 
-    /// Reads planned in `entries` that cannot be sent (encoding failed, no room): their
-    /// requests are answered `Missing` and counted as dropped.
-    pub fn abandon_reads(&mut self, entries: &[Entry]) {
+    /// A planned transaction that cannot be sent (encoding failed, no room): its requests are
+    /// answered `Missing` and counted as dropped.
+    pub fn abandon(&mut self, entries: &[Entry], shape: ReadShape) {
         let Self {
             want_reads,
+            want_specials,
             early,
             counters,
             ..
         } = self;
-        want_reads.retain(|w| {
-            if !entries.iter().any(|e| e.id == w.cred.id as u8) {
+        let special = matches!(shape, ReadShape::Ping | ReadShape::Reboot);
+        let queue = if special { want_specials } else { want_reads };
+        let mut taken = false;
+        queue.retain(|w| {
+            if (special && taken) || !entries.iter().any(|e| e.id == w.cred.id as u8) {
                 return true;
             }
+            taken = true;
             counters.dropped_requests += 1;
             let _ = early.push(w.missing());
             false
@@ -348,13 +428,16 @@ impl Core {
     }
 
     /// Records that the transaction for `entries` went out at `now_ns` with `tx_bytes`
-    /// instruction bytes, expecting `reply_bytes` in `replies` status packets. Moves the
-    /// requests into it.
+    /// instruction bytes ending at stream position `end_pos`, expecting `reply_bytes` in
+    /// `replies` status packets. Moves its requests into it.
+    #[allow(clippy::too_many_arguments)]
     pub fn start_txn(
         &mut self,
         entries: &[Entry],
+        shape: ReadShape,
         fast: bool,
         now_ns: u64,
+        end_pos: u64,
         tx_bytes: usize,
         reply_bytes: usize,
         replies: usize,
@@ -363,34 +446,41 @@ impl Core {
         let end =
             now_ns + wire_ns(tx_bytes + reply_bytes, t.baud) + replies as u64 * t.return_delay_ns;
         self.bus_free_at = self.bus_free_at.max(end);
-        // A full table (the decoder has not run for a while): the oldest is given up.
-        let slot = match self.txns.iter().position(|x| !x.active) {
-            Some(i) => i,
-            None => {
-                let oldest = (0..TXNS).min_by_key(|&i| self.txns[i].seq).unwrap_or(0);
-                self.counters.missing_replies += self.txns[oldest].close_missing(&mut self.early);
-                oldest
+        // The line was quiet since the expired ones: what comes now answers this one.
+        for x in &mut self.txns {
+            if x.expired {
+                x.active = false;
             }
-        };
+        }
+        let slot = self.txns.iter().position(|x| !x.active).unwrap_or(0);
         self.next_seq += 1;
         let seq = self.next_seq;
-        let Self {
-            txns, want_reads, ..
-        } = self;
-        let x = &mut txns[slot];
+        let special = matches!(shape, ReadShape::Ping | ReadShape::Reboot);
+        let queue = match shape {
+            ReadShape::Ping | ReadShape::Reboot => &mut self.want_specials,
+            _ => &mut self.want_reads,
+        };
+        let x = &mut self.txns[slot];
         x.active = true;
+        x.expired = false;
         x.seq = seq;
         x.fast = fast;
         x.t_sent_ns = now_ns;
+        x.end_pos = end_pos;
         x.deadline_ns = end + t.timeout_ns;
         x.entries.clear();
         x.entries.extend_from_slice(entries);
         x.waiters.clear();
         let cap = x.waiters.capacity();
-        want_reads.retain(|w| {
+        let mut taken = false;
+        queue.retain(|w| {
+            if special && taken {
+                return true;
+            }
             let Some(i) = entries.iter().position(|e| e.id == w.cred.id as u8) else {
                 return true;
             };
+            taken = true;
             if x.waiters.len() < cap {
                 x.waiters.push((i, *w));
             }
@@ -398,34 +488,48 @@ impl Core {
         });
     }
 
-    /// Records writes/other packets that occupy the wire for `bytes` bytes without replies.
+    /// Records writes or other packets that occupy the wire for `bytes` bytes without replies.
     pub fn occupy(&mut self, now_ns: u64, bytes: usize) {
         let start = self.bus_free_at.max(now_ns);
         self.bus_free_at = start + wire_ns(bytes, self.timing.baud);
     }
 
-    /// The open fast-read transaction expecting a combined reply, oldest first: its entry
-    /// lengths, to split the reply.
-    pub fn fast_lens(&self, out: &mut Vec<usize>) -> bool {
+    /// The open fast-read transaction expecting a combined reply that arrived at `fence`,
+    /// oldest first: its entry lengths, to split the reply.
+    pub fn fast_lens(&self, fence: u64, out: &mut Vec<usize>) -> bool {
         out.clear();
-        let Some(x) = self.oldest_active(|x| x.fast) else {
+        let Some(x) = self
+            .txns
+            .iter()
+            .filter(|x| x.active && x.fast && x.end_pos <= fence && x.entries.iter().any(|e| !e.done))
+            .min_by_key(|x| x.seq)
+        else {
             return false;
         };
         out.extend(x.entries.iter().map(|e| e.len as usize));
         true
     }
 
-    fn oldest_active(&self, pred: impl Fn(&Txn) -> bool) -> Option<&Txn> {
-        self.txns
-            .iter()
-            .filter(|x| x.active && pred(x))
-            .min_by_key(|x| x.seq)
+    /// Bytes arrived at `now_ns`.
+    pub fn heard(&mut self, now_ns: u64) {
+        self.last_rx_ns = now_ns;
+        // While a reply may still be late, a talking line is not quiet.
+        if self.txns.iter().any(|x| x.active && x.expired) {
+            self.quiet_until = self.quiet_until.max(now_ns + self.timing.timeout_ns);
+        }
     }
 
-    /// A status packet from `id`, in wire order; counted as unsolicited if nobody was waiting
-    /// for it.
-    pub fn on_status(&mut self, id: u8, err: StatusErr, data: &[u8], out: &mut Bounded<Reply>) {
-        if !self.match_status(id, err, data, out) {
+    /// A status packet from `id` that arrived at `fence`, in wire order; counted as
+    /// unsolicited if nobody was waiting for it.
+    pub fn on_status(
+        &mut self,
+        id: u8,
+        err: StatusErr,
+        data: &[u8],
+        fence: u64,
+        out: &mut Bounded<Reply>,
+    ) {
+        if !self.match_status(id, err, data, fence, out) {
             self.unsolicited += 1;
         }
     }
@@ -436,26 +540,23 @@ impl Core {
         id: u8,
         err: StatusErr,
         data: &[u8],
+        fence: u64,
         out: &mut Bounded<Reply>,
     ) -> bool {
-        // The oldest open transaction still expecting `id`.
+        // The oldest transaction, sent before this packet arrived, still expecting `id`.
         let found = self
             .txns
             .iter()
             .enumerate()
-            .filter(|(_, x)| x.active && x.entries.iter().any(|e| e.id == id && !e.done))
+            .filter(|(_, x)| {
+                x.active && x.end_pos <= fence && x.entries.iter().any(|e| e.id == id && !e.done)
+            })
             .min_by_key(|(_, x)| x.seq)
             .map(|(i, x)| (i, x.seq));
         let Some((slot, seq)) = found else {
             return false;
         };
-        // Replies come in wire order: older transactions will get nothing more.
-        for i in 0..TXNS {
-            if self.txns[i].active && self.txns[i].seq < seq {
-                self.counters.missing_replies += self.txns[i].close_missing(out);
-            }
-        }
-        let x = &mut self.txns[slot];
+        let x = &self.txns[slot];
         let Some(ei) = x.entries.iter().position(|e| e.id == id && !e.done) else {
             return false;
         };
@@ -464,7 +565,27 @@ impl Core {
             // A well-formed packet of the wrong size: not the answer to this request.
             return false;
         }
+        // Replies come in wire order: older transactions will get nothing more.
+        for i in 0..TXNS {
+            let old = &mut self.txns[i];
+            if old.active && old.seq < seq {
+                if old.expired {
+                    old.active = false;
+                } else {
+                    self.counters.missing_replies += old.close_missing(out);
+                }
+            }
+        }
+        let x = &mut self.txns[slot];
         x.entries[ei].done = true;
+        if x.entries.iter().all(|e| e.done) {
+            x.active = false;
+        }
+        if x.expired {
+            // Its requests were already reported missing: this value's time is unknown.
+            self.counters.late_replies += 1;
+            return true;
+        }
         self.counters.packets_in += 1;
         let t_sample = x.t_sent_ns;
         if err.failed || err.alert {
@@ -476,78 +597,129 @@ impl Core {
                 continue;
             }
             if (err.failed || err.alert) && first {
-                let _ = out.push(Reply {
-                    cred: w.cred,
-                    data: ReplyData::DeviceError {
+                let _ = out.push(Reply::answer(
+                    w.cred,
+                    w.op(),
+                    ReplyData::DeviceError {
                         code: err.code as u32,
                     },
-                    tick: w.tick,
-                    t_sample_ns: t_sample,
-                });
+                    w.tick,
+                    t_sample,
+                ));
                 first = false;
             }
             let data = if err.failed {
                 ReplyData::Missing { op: w.op() }
             } else {
-                let off = (w.addr - e.addr) as usize;
-                let mut v = 0u64;
-                for (k, b) in data[off..off + w.len as usize].iter().enumerate() {
-                    v |= (*b as u64) << (8 * k);
-                }
-                ReplyData::Register {
-                    addr: w.addr,
-                    len: w.len,
-                    value: v as i64,
+                match w.ask {
+                    Ask::Read => {
+                        let off = (w.addr - e.addr) as usize;
+                        let mut v = 0u64;
+                        for (k, b) in data[off..off + w.len as usize].iter().enumerate() {
+                            v |= (*b as u64) << (8 * k);
+                        }
+                        ReplyData::Register {
+                            addr: w.addr,
+                            len: w.len,
+                            value: v as i64,
+                        }
+                    }
+                    Ask::Ping => match data {
+                        [m0, m1, fw, ..] => ReplyData::Ping {
+                            model: Some(u16::from_le_bytes([*m0, *m1])),
+                            firmware: Some(*fw),
+                        },
+                        _ => ReplyData::Ping {
+                            model: None,
+                            firmware: None,
+                        },
+                    },
+                    Ask::Reboot => ReplyData::Ack,
                 }
             };
-            let _ = out.push(Reply {
-                cred: w.cred,
-                data,
-                tick: w.tick,
-                t_sample_ns: t_sample,
-            });
-        }
-        if x.entries.iter().all(|e| e.done) {
-            x.active = false;
+            let _ = out.push(Reply::answer(w.cred, w.op(), data, w.tick, t_sample));
         }
         true
     }
 
-    /// Reports what could not be sent and the transactions past their deadline. Returns
-    /// whether a transaction expired (the line is quiet for it).
-    pub fn expire(&mut self, now_ns: u64, out: &mut Bounded<Reply>) -> bool {
+    /// Reports what could not be sent and the transactions past their deadline; forgets expired
+    /// ones once the line has been silent long enough.
+    pub fn expire(&mut self, now_ns: u64, out: &mut Bounded<Reply>) {
         for r in self.early.as_slice() {
             let _ = out.push(*r);
         }
         self.early.clear();
-        let mut any = false;
-        for x in &mut self.txns {
-            if x.active && x.deadline_ns <= now_ns {
-                self.counters.missing_replies += x.close_missing(out);
-                any = true;
+        for i in 0..TXNS {
+            let x = &mut self.txns[i];
+            if !x.active {
+                continue;
+            }
+            if !x.expired && x.deadline_ns <= now_ns {
+                let n = x.close_missing(out);
+                self.counters.missing_replies += n;
+                // Keep it matchable: what still comes for it is late.
+                x.active = true;
+                x.expired = true;
+                self.quiet_until = self.quiet_until.max(now_ns + self.timing.timeout_ns);
+            } else if x.expired
+                && now_ns.saturating_sub(x.deadline_ns) >= FORGET_QUIET_NS
+                && now_ns.saturating_sub(self.last_rx_ns) >= FORGET_QUIET_NS
+            {
+                x.active = false;
             }
         }
-        any
     }
 
-    /// The earliest deadline of an open transaction.
+    /// The earliest deadline of a transaction still waiting for replies.
     pub fn next_deadline(&self) -> Option<u64> {
         self.txns
             .iter()
-            .filter(|x| x.active)
+            .filter(|x| x.active && !x.expired)
             .map(|x| x.deadline_ns)
             .min()
     }
 
-    /// Whether any transaction is open.
+    /// Whether any transaction is waiting for replies.
     pub fn any_open(&self) -> bool {
-        self.txns.iter().any(|x| x.active)
+        self.txns.iter().any(|x| x.active && !x.expired)
+    }
+
+    /// Drops every queued request not yet sent (reads answered `Missing`, counted dropped).
+    pub fn preempt(&mut self) {
+        let n = self.want_writes.len() as u64;
+        self.want_writes.clear();
+        self.counters.dropped_requests += n;
+        for q in [&mut self.want_reads, &mut self.want_specials] {
+            for w in q.as_slice() {
+                let _ = self.early.push(w.missing());
+            }
+            self.counters.dropped_requests += q.len() as u64;
+            q.clear();
+        }
+    }
+
+    /// The bus is gone: everything queued or in flight is answered `Missing`; the stage starts
+    /// afresh.
+    pub fn reset(&mut self, out: &mut Bounded<Reply>) {
+        self.preempt();
+        for r in self.early.as_slice() {
+            let _ = out.push(*r);
+        }
+        self.early.clear();
+        for x in &mut self.txns {
+            if x.active && !x.expired {
+                self.counters.missing_replies += x.close_missing(out);
+            }
+            x.active = false;
+        }
+        self.bus_free_at = 0;
+        self.quiet_until = 0;
     }
 }
 
 impl Txn {
-    /// Closes the transaction, answering every request still waiting with `Missing`; returns
-    /// how many.
+    /// Answers every request still waiting with `Missing` and closes the transaction;
+    /// returns how many.
     fn close_missing(&mut self, out: &mut Bounded<Reply>) -> u64 {
         let mut n = 0;
         for &(wi, w) in &self.waiters {

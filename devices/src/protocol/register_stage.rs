@@ -32,6 +32,9 @@ pub(crate) trait Dialect {
     /// Reads go one device per transaction (round robin) instead of all at once.
     fn single(&self) -> bool;
 
+    /// Data bytes of a PING status packet.
+    const PING_LEN: u16;
+
     /// Encodes a SYNC WRITE of `len` bytes at `addr` into `buf`, one `(id, little-endian
     /// value)` per device; `None` if the protocol cannot carry it.
     fn sync_write(
@@ -42,15 +45,17 @@ pub(crate) trait Dialect {
         values: &[(u8, [u8; 4])],
     ) -> Option<usize>;
 
-    /// Encodes the read instruction for `entries` (all of one `shape`) into `buf`; `None` if
-    /// the protocol cannot carry it.
+    /// Encodes the instruction for `entries` (all of one `shape`: a read, or a PING or REBOOT
+    /// of one device) into `buf`; `None` if the protocol cannot carry it.
     fn read(&mut self, buf: &mut [u8], entries: &[Entry], shape: ReadShape) -> Option<ReadTxn>;
 
-    /// Hands a packet the scanner found to `core` (status packets) or counts it.
+    /// Hands a packet the scanner found, which arrived at `fence`, to `core` (status packets)
+    /// or counts it.
     fn on_packet(
         &mut self,
         core: &mut Core,
         packet: <Self::Framing as Framing>::Packet<'_>,
+        fence: u64,
         out: &mut Bounded<Reply>,
     );
 }
@@ -78,7 +83,7 @@ impl<D: Dialect, const N: usize> Stage<D, N> {
         max_packet: usize,
     ) -> Self {
         Self {
-            core: Core::new(timing, max_id, devices, in_flight),
+            core: Core::new(timing, max_id, devices, in_flight, D::PING_LEN),
             dialect,
             scanner: Box::new(PacketScanner::new()),
             pkt: vec![0; max_packet],
@@ -147,39 +152,79 @@ impl<D: Dialect, const N: usize> Stage<D, N> {
         let entries = std::mem::take(&mut self.entries);
         match txn {
             Some(t) if self.emit(t.bytes, out) => {
-                self.core
-                    .start_txn(&entries, t.fast, now_ns, t.bytes, t.reply_bytes, t.replies);
+                let end_pos = self.core.counters.words_out;
+                self.core.start_txn(
+                    &entries,
+                    shape,
+                    t.fast,
+                    now_ns,
+                    end_pos,
+                    t.bytes,
+                    t.reply_bytes,
+                    t.replies,
+                );
             }
-            _ => self.core.abandon_reads(&entries),
+            _ => self.core.abandon(&entries, shape),
         }
         self.entries = entries;
     }
 
-    pub fn decode(&mut self, words: &[u8], out: &mut Bounded<Reply>) {
+    pub fn decode(&mut self, words: &[u8], fence: &[u64], out: &mut Bounded<Reply>, now_ns: u64) {
+        if words.is_empty() {
+            return;
+        }
         self.core.counters.words_in += words.len() as u64;
+        self.core.heard(now_ns);
         let Self {
             core,
             dialect,
             scanner,
             ..
         } = self;
-        scanner.feed(words, |p| dialect.on_packet(core, p, out));
+        // Feed runs of bytes that arrived with the same fence; a packet completes at the fence
+        // of its last byte.
+        let mut start = 0;
+        while start < words.len() {
+            let f = fence.get(start).copied().unwrap_or(u64::MAX);
+            let mut end = start + 1;
+            while end < words.len() && fence.get(end).copied().unwrap_or(u64::MAX) == f {
+                end += 1;
+            }
+            scanner.feed(&words[start..end], |p| dialect.on_packet(core, p, f, out));
+            start = end;
+        }
     }
 
     pub fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx) {
         let due = self.core.next_deadline().is_some_and(|d| d <= ctx.now_ns);
         if due || (!self.core.any_open() && self.scanner.buffered() > 0) {
             // The line is quiet for the oldest transaction: a partial packet will never
-            // complete. Packets complete behind it still count.
+            // complete. Packets complete behind it still count (at the newest fence).
             let Self {
                 core,
                 dialect,
                 scanner,
                 ..
             } = self;
-            scanner.expire_with(|p| dialect.on_packet(core, p, out));
+            scanner.expire_with(|p| dialect.on_packet(core, p, u64::MAX, out));
         }
         self.core.expire(ctx.now_ns, out);
+    }
+
+    pub fn preempt(&mut self) {
+        self.core.preempt();
+    }
+
+    pub fn reset(&mut self, out: &mut Bounded<Reply>) {
+        let Self {
+            core,
+            dialect,
+            scanner,
+            ..
+        } = self;
+        // A half-received packet will never complete; whole ones are from the old bus.
+        scanner.expire_with(|p| dialect.on_packet(core, p, 0, out));
+        self.core.reset(out);
     }
 
     pub fn counters(&self) -> ProtocolCounters {
@@ -210,10 +255,11 @@ macro_rules! protocol_over_stage {
             fn decode(
                 &mut self,
                 words: &[u8],
+                fence: &[u64],
                 out: &mut $crate::queue::Bounded<$crate::message::Reply>,
-                _ctx: $crate::stage::TickCtx,
+                ctx: $crate::stage::TickCtx,
             ) {
-                self.stage.decode(words, out);
+                self.stage.decode(words, fence, out, ctx.now_ns);
             }
 
             fn expire(
@@ -226,6 +272,14 @@ macro_rules! protocol_over_stage {
 
             fn counters(&self) -> $crate::stage::ProtocolCounters {
                 self.stage.counters()
+            }
+
+            fn reset(&mut self, out: &mut $crate::queue::Bounded<$crate::message::Reply>) {
+                self.stage.reset(out);
+            }
+
+            fn preempt(&mut self) {
+                self.stage.preempt();
             }
         }
     };

@@ -79,31 +79,41 @@ impl Protocol for SimProtocol {
                     continue;
                 }
             };
-            if word.kind == SimKind::Sample
-                && !self
-                    .outstanding
-                    .track(Pending::new(r, ctx.now_ns + self.timeout_ns))
-            {
-                self.counters.dropped_requests += 1;
-                continue;
-            }
             if out.push(word).is_err() {
                 self.counters.dropped_requests += 1;
                 continue;
             }
             self.counters.packets_out += 1;
             self.counters.words_out += 1;
+            let end_pos = self.counters.words_out;
+            if word.kind == SimKind::Sample
+                && !self
+                    .outstanding
+                    .track(Pending::new(r, ctx.now_ns + self.timeout_ns, end_pos))
+            {
+                self.counters.dropped_requests += 1;
+            }
         }
     }
 
-    fn decode(&mut self, words: &[SimWord], out: &mut Bounded<Reply>, _ctx: TickCtx) {
-        for w in words {
+    fn decode(
+        &mut self,
+        words: &[SimWord],
+        fence: &[u64],
+        out: &mut Bounded<Reply>,
+        _ctx: TickCtx,
+    ) {
+        for (i, w) in words.iter().enumerate() {
             self.counters.words_in += 1;
             if w.kind != SimKind::Value {
                 self.counters.discarded_words += 1;
                 continue;
             }
-            match self.outstanding.resolve(w.cred, |op| *op == Op::Sample) {
+            let fence = fence.get(i).copied().unwrap_or(u64::MAX);
+            match self
+                .outstanding
+                .resolve(w.cred, fence, |op| *op == Op::Sample)
+            {
                 Some(p) => {
                     self.counters.packets_in += 1;
                     let _ = out.push(p.reply(ReplyData::Value(w.value)));
@@ -122,6 +132,16 @@ impl Protocol for SimProtocol {
 
     fn counters(&self) -> ProtocolCounters {
         self.counters
+    }
+
+    fn reset(&mut self, out: &mut Bounded<Reply>) {
+        self.counters.missing_replies += self.outstanding.drain_missing(out);
+    }
+
+    fn preempt(&mut self) {}
+
+    fn discard_unsent(&mut self, from: u64) {
+        self.counters.dropped_requests += self.outstanding.forget_from(from);
     }
 }
 
@@ -325,7 +345,7 @@ impl Device for SimDevice {
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
         let value = match action {
             SafeAction::Hold => self.last,
-            SafeAction::TorqueOff => 0.0,
+            SafeAction::TorqueOff | SafeAction::Damp { .. } => 0.0,
             SafeAction::Setpoint { value, .. } => value,
         };
         self.pending = Some(value);
@@ -336,7 +356,7 @@ impl Device for SimDevice {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::stage::{Link, LinkOf};
+    use crate::link::{Link, LinkOf};
 
     fn ctx(tick: u64, now_ns: u64) -> TickCtx {
         TickCtx { tick, now_ns }
@@ -363,7 +383,7 @@ mod tests {
         let u = ups.as_slice()[0];
         assert_eq!((u.tick, u.t_sample_ns), (5, t));
         assert!((u.value.unwrap() - (t as f64 * 1e-9).sin()).abs() < 1e-12);
-        assert_eq!(link.counters().packets_in, 1);
+        assert_eq!(link.counters().protocol.packets_in, 1);
     }
 
     #[test]
@@ -397,7 +417,7 @@ mod tests {
         let mut ups = Bounded::with_capacity(8);
         dev.reply(&replies.as_slice()[0], &mut ups);
         assert_eq!(ups.as_slice()[0].value, None, "stale, never invented");
-        assert_eq!(link.counters().missing_replies, 1);
+        assert_eq!(link.counters().protocol.missing_replies, 1);
     }
 
     #[test]
