@@ -10,10 +10,11 @@ use conductor_bus::{
 use conductor_devices::kinds::BuildError;
 use conductor_devices::TickCtx;
 
+use crate::events::{EventLog, Names};
 use crate::manifest::Subsystem;
 use crate::rt::RtStatus;
 use crate::schedule::{sleep_until, Schedule, Wake};
-use crate::stages::Stages;
+use crate::stages::{Stages, Unconfirmed};
 
 /// Stats are published about this often.
 pub const STATS_INTERVAL_NS: u64 = 100_000_000;
@@ -53,6 +54,36 @@ pub struct Executor {
     health: Health,
     rt: RtStatus,
     states: u32,
+    events: EventLog,
+    names: Names,
+    optional: Vec<bool>,
+}
+
+/// How a stop went.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct StopReport {
+    /// One line per device whose safe action was not confirmed on the wire.
+    pub unconfirmed: Vec<String>,
+    /// Devices whose safe action was confirmed on the wire.
+    pub confirmed: usize,
+    /// Devices without a lifecycle (simulated channels) whose safe action was sent; there is
+    /// nothing to confirm it with.
+    pub sent: usize,
+}
+
+/// How the bring-up went.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct BringUp {
+    /// Non-optional devices that could not be brought up, one line each: the executor must
+    /// not run.
+    pub failed: Vec<String>,
+    /// Optional devices that did not come up (their states stay STALE; they are looked for
+    /// again every second), one line each.
+    pub missing: Vec<String>,
+    /// One line per device that is up: model, read layout, configuration.
+    pub up: Vec<String>,
+    /// Whether every device settled before the time allowed ran out.
+    pub settled: bool,
 }
 
 impl core::fmt::Debug for Executor {
@@ -97,6 +128,7 @@ impl Executor {
         let publisher = StatePublisher::create(bus, &sub.name, &state_specs(sub))?;
         let commands = CommandReceiver::create(bus, &sub.name)?;
         let stats = StatsPublisher::create(bus, &sub.name)?;
+        let names = Names::of(sub);
         Ok(Self {
             rate_hz: sub.rate_hz,
             stages,
@@ -106,6 +138,9 @@ impl Executor {
             health: Health::default(),
             rt: RtStatus::default(),
             states: sub.states.len() as u32,
+            events: EventLog::spawn(names.clone()),
+            names,
+            optional: sub.devices.iter().map(|d| d.optional).collect(),
         })
     }
 
@@ -144,6 +179,8 @@ impl Executor {
         if published > 0 && publisher.notify_tick().is_err() {
             h.publish_errors += 1;
         }
+        let events = &mut self.events;
+        stages.drain_events(|e| events.send(e));
         if now_ns >= h.next_stats_ns {
             self.publish_stats(now_ns);
         }
@@ -163,6 +200,7 @@ impl Executor {
         let hist = &h.hist;
         let bus_errors = self.stages.bus_errors() + h.publish_errors + h.command_errors;
         let stale = self.stages.stale_states();
+        let dev = self.stages.health();
         let (rate, states, rt) = (self.rate_hz, self.states, &self.rt);
         let _ = self.stats.publish(|s: &mut ExecutorStats| {
             s.seq = seq;
@@ -184,6 +222,15 @@ impl Executor {
             s.states = states;
             s.rt_active = u32::from(rt.fifo);
             s.cpu = rt.cpu.map_or(-1, |c| c as i32);
+            s.bus_outages = dev.outages;
+            s.device_faults = c.faults;
+            s.late_replies = dev.late_replies;
+            s.setpoints_refused = c.refused;
+            s.devices = dev.devices;
+            s.devices_enabled = dev.enabled;
+            s.devices_tripped = dev.tripped;
+            s.devices_faulted = dev.faulted;
+            s.links_down = dev.links_down;
             s.histogram = *hist.counts();
         });
         h.last_stats_ns = now_ns;
@@ -191,25 +238,111 @@ impl Executor {
         h.next_stats_ns = now_ns + STATS_INTERVAL_NS;
     }
 
-    /// Orderly stop: every writable device's safe action is sent, the links are flushed for a few
-    /// base periods, final stats are published and the hardware is quieted.
-    pub fn shutdown(&mut self, period_ns: u64, slot: u64) {
-        let now = monotonic_ns();
+    /// Orderly stop: every writable device's safe action is put on the wire ahead of anything
+    /// queued, and the executor keeps the buses going (every `period_ns`, at most 5 ms) until
+    /// each action is confirmed (answered by the device, acknowledged by the adapter, read
+    /// back) or `timeout_ns` has passed; then final stats are published and the hardware is
+    /// closed. Reports each device that could not be confirmed.
+    pub fn shutdown(&mut self, period_ns: u64, slot: u64, timeout_ns: u64) -> StopReport {
+        let t0 = monotonic_ns();
         self.stages.begin_shutdown(TickCtx {
             tick: slot,
-            now_ns: now,
+            now_ns: t0,
         });
         let never = AtomicBool::new(false);
-        for i in 0..3 {
+        let step = period_ns.clamp(500_000, 5_000_000);
+        let mut k = 1;
+        loop {
             let now = monotonic_ns();
-            self.stages.flush_links(TickCtx {
-                tick: slot + i,
+            self.stages.stop_tick(TickCtx {
+                tick: slot + k,
                 now_ns: now,
             });
-            sleep_until(now + period_ns.min(10_000_000), 0, &never);
+            k += 1;
+            if self.stages.stopped() || now.saturating_sub(t0) >= timeout_ns {
+                break;
+            }
+            sleep_until(now + step, 0, &never);
         }
+        // Off the real-time path now: tell what happened on the way.
+        let names = &self.names;
+        self.stages
+            .drain_events(|e| crate::note!("{}", names.describe(e)));
+        let mut report = StopReport {
+            unconfirmed: Vec::new(),
+            confirmed: 0,
+            sent: self.stages.unmanaged_with_safe_action(),
+        };
+        let unconfirmed: Vec<(usize, Unconfirmed)> = self.stages.unconfirmed().collect();
+        for (i, why) in &unconfirmed {
+            let who = self.names.device(*i);
+            report.unconfirmed.push(format!(
+                "{who}: safe action NOT confirmed{}",
+                match why {
+                    Unconfirmed::BusDown => ": its bus is gone",
+                    Unconfirmed::NotUp => ": the device is not up (it never answered, or is being brought up again)",
+                    Unconfirmed::NoAnswer => " within the time allowed (no answer, no acknowledgement)",
+                }
+            ));
+        }
+        report.confirmed = self
+            .stages
+            .device_status()
+            .filter(|s| s.safe == conductor_devices::SafeProgress::Confirmed)
+            .count();
         self.stages.shutdown_hardware();
         self.publish_stats(monotonic_ns());
+        report
+    }
+
+    /// Runs ticks (sleep-based, at the base period) until every device has been brought up
+    /// (enabled, limp, or failed), `timeout_ns` has passed, or `stop` is set. Returns the last
+    /// slot and what came up.
+    pub fn bring_up(&mut self, period_ns: u64, timeout_ns: u64, stop: &AtomicBool) -> (u64, BringUp) {
+        let t0 = monotonic_ns();
+        let last = run_from(self, period_ns, 0, stop, 0, |x| {
+            x.stages.settled() || monotonic_ns().saturating_sub(t0) >= timeout_ns
+        });
+        let mut b = BringUp {
+            settled: self.stages.settled(),
+            ..BringUp::default()
+        };
+        let names = &self.names;
+        let statuses: Vec<_> = self.stages.device_status().collect();
+        for (i, st) in statuses.iter().enumerate() {
+            let who = names.device(i);
+            let optional = self.optional.get(i).copied().unwrap_or(false);
+            match (st.phase, st.failure) {
+                (conductor_devices::Phase::Failed, Some(f)) | (conductor_devices::Phase::Disabled, Some(f)) => {
+                    let line = format!("{who}: {}", names.failure(i, f));
+                    if optional {
+                        b.missing.push(line);
+                    } else {
+                        b.failed.push(line);
+                    }
+                }
+                (p, _) if !p.is_settled() => {
+                    let line = format!("{who}: still {} when the bring-up time ran out", p.name());
+                    if optional {
+                        b.missing.push(line);
+                    } else {
+                        b.failed.push(line);
+                    }
+                }
+                (p, _) if st.managed() => {
+                    b.up.push(format!("{who} is {}: {}", p.name(), self.stages.describe(i)))
+                }
+                _ => {}
+            }
+        }
+        // The phase changes of the bring-up are in the lines above.
+        self.stages.drain_events(|_| {});
+        (last, b)
+    }
+
+    /// The names events are told with.
+    pub fn names(&self) -> &Names {
+        &self.names
     }
 
     /// The stages (tests inspect them).
@@ -231,14 +364,31 @@ impl Executor {
 /// The deadline loop: sleeps until each base deadline (optionally spinning the last `spin_ns`),
 /// ticks, and returns the last slot when `stop` is set.
 pub fn run(exec: &mut Executor, period_ns: u64, spin_ns: u64, stop: &AtomicBool) -> u64 {
+    run_from(exec, period_ns, spin_ns, stop, 0, |_| false)
+}
+
+/// [`run`], numbering slots from `first_slot`, until `stop` is set or `done` says so after a
+/// tick.
+pub fn run_from(
+    exec: &mut Executor,
+    period_ns: u64,
+    spin_ns: u64,
+    stop: &AtomicBool,
+    first_slot: u64,
+    mut done: impl FnMut(&Executor) -> bool,
+) -> u64 {
     let mut sched = Schedule::new(monotonic_ns() + period_ns, period_ns);
-    let mut slot = 0;
+    let mut slot = first_slot;
     while sleep_until(sched.deadline_ns(), spin_ns, stop) {
         let now = monotonic_ns();
-        let wake = sched.wake(now);
+        let mut wake = sched.wake(now);
+        wake.slot += first_slot;
         exec.tick(&wake, now);
         slot = wake.slot;
         sched.advance();
+        if done(exec) {
+            break;
+        }
     }
     slot
 }

@@ -7,6 +7,7 @@
 //! * [`manifest`] — the TOML model and its validator (every error with its location).
 //! * [`stages`] — the tick scheduler over the `conductor-devices` stage traits.
 //! * [`executor`] — the stages on the bus, and the absolute-deadline loop.
+//! * [`events`] — the log of the hardware edge, fed from the real-time thread without blocking.
 //! * [`schedule`], [`rt`], [`signals`] — deadlines, real-time set-up, stop requests.
 //! * [`process`] — the `conductor-executor` program.
 //! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
@@ -30,6 +31,7 @@ macro_rules! note {
 
 pub mod cleanup;
 pub mod demo;
+pub mod events;
 pub mod executor;
 pub mod launcher;
 pub mod manifest;

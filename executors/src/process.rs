@@ -4,9 +4,16 @@
 //! real-time thread (the main thread), sets up real time, prints `READY` on stdout, runs the
 //! deadline loop until SIGINT/SIGTERM, then puts every device in its safe state and exits 0.
 //!
-//! Exit status: 0 orderly stop; 1 a runtime failure (worth a restart); 2 a configuration error
-//! (bad arguments or manifest, unknown subsystem, the subsystem already runs in the domain:
-//! restarting cannot help); 3 real time required but not permitted.
+//! Before `READY` every device is brought up (probe, model check, configuration, enable from
+//! where it is); a device that cannot be (missing, wrong model, configuration refused) is an
+//! error naming it, unless the manifest marks it `optional`. On a stop every safe action is
+//! confirmed on the wire before the executor says so.
+//!
+//! Exit status: 0 orderly stop (every safe action confirmed); 1 a runtime failure (worth a
+//! restart); 2 a configuration error (bad arguments or manifest, unknown subsystem, the
+//! subsystem already runs in the domain, a device that is not as the manifest says: restarting
+//! cannot help); 3 real time required but not permitted; 4 a stop whose safe actions could not
+//! all be confirmed (each device named on stderr).
 
 use std::ffi::OsString;
 use std::io::Write as _;
@@ -16,7 +23,7 @@ use std::process::ExitCode;
 use clap::Parser;
 use conductor_bus::{prepare_thread, Bus, Domain};
 
-use crate::executor::{run, Executor};
+use crate::executor::{run_from, Executor, StopReport};
 use crate::manifest::Manifest;
 use crate::rt::{self, RtRequest};
 use crate::signals::{self, Stop};
@@ -29,6 +36,13 @@ pub const EXIT_FAILURE: u8 = 1;
 pub const EXIT_CONFIG: u8 = 2;
 /// Exit status when real time is required but not permitted.
 pub const EXIT_NO_RT: u8 = 3;
+/// Exit status of a stop whose safe actions could not all be confirmed on the wire.
+pub const EXIT_UNSAFE: u8 = 4;
+
+/// Time allowed for every device to be brought up before `READY` (ns).
+pub const BRING_UP_NS: u64 = 5_000_000_000;
+/// Time allowed for the safe actions of a stop to be confirmed (ns).
+pub const STOP_CONFIRM_NS: u64 = 1_000_000_000;
 
 /// The line printed on stdout once the executor's services exist and its loop starts.
 pub const READY: &str = "READY";
@@ -189,17 +203,70 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     );
     exec.set_rt_status(status);
 
+    // Bring every device up (probe, model, configuration, enable from where it is) before
+    // saying READY: a robot that is not as the manifest says does not run.
+    let (last, up) = exec.bring_up(sub.period_ns, BRING_UP_NS, stop.flag());
+    for line in &up.up {
+        note!("{tag}: {line}");
+    }
+    for line in &up.missing {
+        note!("{tag}: warning: optional {line}; its states stay STALE until it answers");
+    }
+    if !up.failed.is_empty() {
+        for line in &up.failed {
+            note!("{tag}: error: {line}");
+        }
+        let r = exec.shutdown(sub.period_ns, last + 1, STOP_CONFIRM_NS);
+        for line in &r.unconfirmed {
+            note!("{tag}: error: {line}");
+        }
+        note!(
+            "{tag}: {} device(s) could not be brought up; not running",
+            up.failed.len()
+        );
+        return EXIT_CONFIG;
+    }
+    if stop.flag().load(std::sync::atomic::Ordering::Relaxed) {
+        let r = exec.shutdown(sub.period_ns, last + 1, STOP_CONFIRM_NS);
+        return stopped(&tag, &exec, &r);
+    }
+
     let mut out = std::io::stdout();
     if writeln!(out, "{READY}").and_then(|_| out.flush()).is_err() {
         // Nobody reads our stdout any more (the launcher is gone): still run.
     }
-    let last = run(&mut exec, sub.period_ns, sub.spin_ns, stop.flag());
-    exec.shutdown(sub.period_ns, last + 1);
+    let last = run_from(&mut exec, sub.period_ns, sub.spin_ns, stop.flag(), last + 1, |_| false);
+    let r = exec.shutdown(sub.period_ns, last + 1, STOP_CONFIRM_NS);
+    stopped(&tag, &exec, &r)
+}
+
+/// Reports a stop: each device whose safe action could not be confirmed, loudly, and the exit
+/// status (0 only when every safe action was confirmed on the wire).
+fn stopped(tag: &str, exec: &Executor, r: &StopReport) -> u8 {
     let (ticks, misses) = exec.ticks_and_misses();
-    note!(
-        "{tag}: stopped after {ticks} ticks ({misses} missed deadlines, lateness p99 {} µs); \
-         devices in their safe state",
+    let timing = format!(
+        "stopped after {ticks} ticks ({misses} missed deadlines, lateness p99 {} µs)",
         exec.lateness().quantile(0.99) / 1000
     );
-    EXIT_OK
+    if r.unconfirmed.is_empty() {
+        let what = match (r.confirmed, r.sent) {
+            (0, 0) => "no device needed a safe action".to_string(),
+            (n, 0) => format!("devices in their safe state ({n} confirmed on the wire)"),
+            (0, k) => format!("devices in their safe state ({k} simulated: sent)"),
+            (n, k) => format!(
+                "devices in their safe state ({n} confirmed on the wire, {k} simulated: sent)"
+            ),
+        };
+        note!("{tag}: {timing}; {what}");
+        EXIT_OK
+    } else {
+        for line in &r.unconfirmed {
+            note!("{tag}: ERROR: {line}");
+        }
+        note!(
+            "{tag}: {timing}; {} device(s) NOT confirmed in their safe state",
+            r.unconfirmed.len()
+        );
+        EXIT_UNSAFE
+    }
 }

@@ -20,11 +20,26 @@
 //! per channel (the newest setpoint wins, one sample request), device→protocol requests queue in
 //! a [`Bounded`] queue, replies queue per device. Every capacity is fixed by [`Stages::new`];
 //! a full queue is counted as a bus error, never grown. Nothing here allocates, locks or blocks.
+//!
+//! **The hardware edge.** The first tick brings every device up (its own lifecycle: probe,
+//! configuration, enable from where it is; see `conductor_devices::lifecycle`). Every tick the
+//! stages poll each device's status and each link's state, and act on transitions:
+//!
+//! * a setpoint for a device that cannot take it now (disabled, tripped, being brought up) is
+//!   refused: `REJECTED` on its state, counted, never silently dropped;
+//! * a device fault trips the device (its safe action, ahead of anything queued on its bus);
+//! * the watchdog trips every writable device the same way; a tripped device refuses
+//!   setpoints until its `enable` state is written 1;
+//! * a vanished bus makes its devices' states `STALE`; when the link has reopened it, its
+//!   devices are brought up again and resume;
+//! * each transition is an [`Event`] (drained by the executor into its log, never printed here).
 
 use conductor_bus::status;
 use conductor_devices::kinds::{self, BuildError, Capacity};
+use conductor_devices::lifecycle::REPROBE_NS;
 use conductor_devices::{
-    Bounded, Credential, Device, Link, Reply, Request, SafeAction, TickCtx, Update,
+    Bounded, Credential, Device, DeviceStatus, Errno, Failure, Link, LinkState, Phase, Reply,
+    Request, SafeAction, SafeProgress, Startup, TickCtx, Update,
 };
 
 use crate::manifest::{Calibration, SafeSpec, Subsystem};
@@ -61,6 +76,83 @@ pub struct Counters {
     pub unmatched_replies: u64,
     /// Work dropped because a fixed-capacity queue was full.
     pub overflows: u64,
+    /// Setpoints refused because their device could not take them (disabled, tripped).
+    pub refused: u64,
+    /// Device fault transitions (a fault raised or changed).
+    pub faults: u64,
+    /// Events that did not fit the event queue (the log missed them).
+    pub events_lost: u64,
+}
+
+/// Why a device was tripped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TripCause {
+    /// No command frame within the watchdog timeout.
+    Watchdog,
+    /// The device reported a fault.
+    Fault,
+}
+
+/// A transition worth a log line. Indices are the manifest's (links are protocols).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Event {
+    /// A bus vanished.
+    BusDown {
+        /// Protocol index.
+        link: usize,
+        /// The OS error, where there was one.
+        cause: Option<Errno>,
+    },
+    /// A bus is back (its devices are brought up again).
+    BusUp {
+        /// Protocol index.
+        link: usize,
+        /// How long it was gone (ns).
+        outage_ns: u64,
+    },
+    /// A device changed phase.
+    Phase {
+        /// Device index.
+        device: usize,
+        /// The new phase.
+        phase: Phase,
+        /// Why, when it failed or an enable was refused.
+        failure: Option<Failure>,
+    },
+    /// A device reports a fault (or a different one).
+    Fault {
+        /// Device index.
+        device: usize,
+        /// Fault bits or code.
+        bits: u32,
+    },
+    /// A device's fault has cleared.
+    FaultCleared {
+        /// Device index.
+        device: usize,
+    },
+    /// A device was tripped to its safe action.
+    Tripped {
+        /// Device index.
+        device: usize,
+        /// Why.
+        cause: TripCause,
+    },
+    /// A device's safe action was confirmed on the wire.
+    SafeConfirmed {
+        /// Device index.
+        device: usize,
+    },
+    /// A setpoint for a device that cannot take it was refused (first one per device until the
+    /// device drives again).
+    Refused {
+        /// State index.
+        state: usize,
+        /// Its device's phase.
+        phase: Phase,
+        /// Its device is tripped.
+        tripped: bool,
+    },
 }
 
 struct StateRt {
@@ -84,6 +176,8 @@ struct StateRt {
     clamped: bool,
     rejected: bool,
     watchdog: bool,
+    disabled: bool,
+    tripped: bool,
     /// Setpoint (device units) waiting for the state's tick.
     pending: Option<f64>,
 }
@@ -109,6 +203,12 @@ impl StateRt {
         if self.simulated {
             s |= status::SIMULATED;
         }
+        if self.disabled {
+            s |= status::DISABLED;
+        }
+        if self.tripped {
+            s |= status::TRIPPED;
+        }
         s
     }
 }
@@ -129,6 +229,16 @@ struct DeviceRt {
     updates: Bounded<Update>,
     channel_state: Vec<Option<usize>>,
     safe: Option<SafeAction>,
+    startup: Startup,
+    optional: bool,
+    /// Its status at the end of the last tick.
+    status: DeviceStatus,
+    /// A failed optional device is looked for again then.
+    reprobe_ns: Option<u64>,
+    /// A refusal was logged since it last drove.
+    refusal_logged: bool,
+    /// Tripped by the watchdog (its states carry WATCHDOG until it is enabled again).
+    watchdog: bool,
 }
 
 struct LinkRt {
@@ -139,6 +249,7 @@ struct LinkRt {
     replies: Bounded<Reply>,
     creds: Vec<(Credential, usize)>,
     urgent: bool,
+    state: LinkState,
 }
 
 struct Watchdog {
@@ -154,6 +265,8 @@ pub struct Stages {
     links: Vec<LinkRt>,
     watchdog: Watchdog,
     counters: Counters,
+    events: Bounded<Event>,
+    started: bool,
 }
 
 impl core::fmt::Debug for Stages {
@@ -184,8 +297,16 @@ impl Stages {
             )?);
         }
         let mut devices = Vec::with_capacity(sub.devices.len());
-        for d in &sub.devices {
-            devices.push(kinds::build_device(&d.kind, &d.params, d.credential)?);
+        for (i, d) in sub.devices.iter().enumerate() {
+            let mut dev = kinds::build_device(&d.kind, &d.params, d.credential)?;
+            let sampled: Vec<usize> = sub
+                .states
+                .iter()
+                .filter(|s| s.device == i && s.readable)
+                .map(|s| s.channel)
+                .collect();
+            dev.configure_reads(&sampled);
+            devices.push(dev);
         }
         Ok(Self::from_parts(sub, links, devices))
     }
@@ -216,6 +337,7 @@ impl Stages {
                 replies: Bounded::with_capacity(2 * cap.in_flight),
                 creds: Vec::with_capacity(cap.devices),
                 urgent: false,
+                state: LinkState::Up,
             })
             .collect();
         let mut dev_rt = Vec::with_capacity(devices.len());
@@ -232,9 +354,11 @@ impl Stages {
                 }
             }
             let writable = sub.states.iter().any(|s| s.device == i && s.writable);
+            let kd = d.params.float("kd").unwrap_or(1.0);
             let safe = writable.then(|| match d.safe {
                 SafeSpec::Hold => SafeAction::Hold,
                 SafeSpec::TorqueOff => SafeAction::TorqueOff,
+                SafeSpec::Damp { kd: k } => SafeAction::Damp { kd: k.unwrap_or(kd) },
                 SafeSpec::Setpoint { state, value } => {
                     let s = &sub.states[state];
                     SafeAction::Setpoint {
@@ -252,6 +376,12 @@ impl Stages {
                 updates: Bounded::with_capacity(up * channels.max(1)),
                 channel_state,
                 safe,
+                startup: d.startup,
+                optional: d.optional,
+                status: DeviceStatus::UNMANAGED,
+                reprobe_ns: None,
+                refusal_logged: false,
+                watchdog: false,
             });
         }
         let states = sub
@@ -277,6 +407,8 @@ impl Stages {
                 clamped: false,
                 rejected: false,
                 watchdog: false,
+                disabled: false,
+                tripped: false,
                 pending: None,
             })
             .collect();
@@ -290,20 +422,25 @@ impl Stages {
                 tripped: false,
             },
             counters: Counters::default(),
+            events: Bounded::with_capacity(256),
+            started: false,
         }
     }
 
     /// Applies every setpoint of one command frame at once (thesis `sendCtrl`): each value is
-    /// checked (finite, known, writable), clamped to its limits and converted to device units; it
-    /// goes downstream at its state's next tick. `sched_ns` is the current tick's scheduled time
-    /// (it restarts the watchdog).
+    /// checked (finite, known, writable, and its device able to take it now), clamped to its
+    /// limits and converted to device units; it goes downstream at its state's next tick.
+    /// `sched_ns` is the current tick's scheduled time (it restarts the watchdog).
     pub fn apply_frame(&mut self, setpoints: &[conductor_bus::Setpoint], sched_ns: u64) {
         self.counters.frames += 1;
         self.watchdog.last_frame_ns = Some(sched_ns);
         if self.watchdog.tripped {
+            // The watchdog may trip again; the devices it tripped stay tripped until enabled.
             self.watchdog.tripped = false;
-            for s in &mut self.states {
-                s.watchdog = false;
+            for s in self.states.iter_mut() {
+                if !self.devices[s.device].status.managed() {
+                    s.watchdog = false;
+                }
             }
         }
         for sp in setpoints {
@@ -314,6 +451,26 @@ impl Stages {
             if !s.writable || !sp.value.is_finite() {
                 s.rejected = true;
                 self.counters.rejected += 1;
+                continue;
+            }
+            let d = &mut self.devices[s.device];
+            if !d.dev.accepts(s.channel) {
+                // It cannot take effect: refused loudly, never dropped silently.
+                s.rejected = true;
+                s.pending = None;
+                self.counters.rejected += 1;
+                self.counters.refused += 1;
+                if !d.refusal_logged {
+                    d.refusal_logged = true;
+                    let e = Event::Refused {
+                        state: sp.index as usize,
+                        phase: d.status.phase,
+                        tripped: d.status.tripped,
+                    };
+                    if self.events.push(e).is_err() {
+                        self.counters.events_lost += 1;
+                    }
+                }
                 continue;
             }
             let v = sp.value.clamp(s.min, s.max);
@@ -330,6 +487,21 @@ impl Stages {
         }
     }
 
+    fn event(&mut self, e: Event) {
+        if self.events.push(e).is_err() {
+            self.counters.events_lost += 1;
+        }
+    }
+
+    /// Brings every device up (called by the first tick).
+    fn start(&mut self, ctx: TickCtx) {
+        self.started = true;
+        for d in &mut self.devices {
+            d.dev.bring_up(d.startup, ctx);
+            d.status = d.dev.status();
+        }
+    }
+
     /// Runs one base tick. `sched_ns` is the tick's scheduled time (watchdog clock), `now_ns`
     /// the time it actually started (the sample time of its requests). Every state that ticks
     /// and has a value is handed to `publish`; returns how many were.
@@ -341,6 +513,9 @@ impl Stages {
         mut publish: impl FnMut(&Publish),
     ) -> usize {
         let ctx = TickCtx { tick, now_ns };
+        if !self.started {
+            self.start(ctx);
+        }
         self.check_watchdog(sched_ns, ctx);
 
         // 2. State stage, downstream.
@@ -382,11 +557,15 @@ impl Stages {
             self.counters.overflows += out.overflows() - before;
         }
 
-        // 4–6. Protocol down, hardware, protocol up.
-        for l in &mut self.links {
+        // 4–6. Hardware in, protocol down, hardware out, protocol up.
+        for li in 0..self.links.len() {
+            let l = &mut self.links[li];
             let proto = l.urgent || tick.is_multiple_of(l.protocol_divisor);
             let hw = l.urgent || tick.is_multiple_of(l.hardware_divisor);
             l.urgent = false;
+            if hw {
+                l.link.receive(ctx);
+            }
             if proto {
                 l.link.encode(l.requests.as_slice(), ctx);
                 l.requests.clear();
@@ -395,24 +574,85 @@ impl Stages {
                 self.counters.hw_errors += 1;
             }
             if proto {
-                let before = l.replies.overflows();
-                l.link.decode(&mut l.replies, ctx);
-                self.counters.overflows += l.replies.overflows() - before;
-                for r in l.replies.as_slice() {
-                    match l.creds.iter().find(|(c, _)| *c == r.cred) {
-                        Some(&(_, di)) => {
-                            if self.devices[di].up.push(*r).is_err() {
-                                self.counters.overflows += 1;
-                            }
-                        }
-                        None => self.counters.unmatched_replies += 1,
-                    }
-                }
-                l.replies.clear();
+                self.route_replies(li, ctx);
             }
+            self.watch_link(li, ctx);
         }
 
         // 7. Device stage, upstream.
+        self.devices_up(tick, ctx);
+        self.watch_devices(ctx);
+
+        // 8. State stage, upstream.
+        let mut n = 0;
+        for (index, s) in self.states.iter().enumerate() {
+            if !tick.is_multiple_of(s.divisor) || !s.have_value {
+                continue;
+            }
+            publish(&Publish {
+                index,
+                tick: s.sample_tick,
+                t_sample_ns: s.t_sample_ns,
+                value: s.value,
+                status: s.status(),
+            });
+            n += 1;
+        }
+        n
+    }
+
+    /// Decodes a link's replies and hands each to the device with its credential.
+    fn route_replies(&mut self, li: usize, ctx: TickCtx) {
+        let l = &mut self.links[li];
+        let before = l.replies.overflows();
+        l.link.decode(&mut l.replies, ctx);
+        self.counters.overflows += l.replies.overflows() - before;
+        for r in l.replies.as_slice() {
+            match l.creds.iter().find(|(c, _)| *c == r.cred) {
+                Some(&(_, di)) => {
+                    if self.devices[di].up.push(*r).is_err() {
+                        self.counters.overflows += 1;
+                    }
+                }
+                None => self.counters.unmatched_replies += 1,
+            }
+        }
+        l.replies.clear();
+    }
+
+    /// A link that went down or came back: its devices lose their bus, or are brought up again.
+    fn watch_link(&mut self, li: usize, ctx: TickCtx) {
+        let now = self.links[li].link.state();
+        let was = self.links[li].state;
+        if now == was {
+            return;
+        }
+        self.links[li].state = now;
+        match (was, now) {
+            (LinkState::Up, LinkState::Down { cause, .. }) => {
+                for d in self.devices.iter_mut().filter(|d| d.link == li) {
+                    d.dev.bus_lost();
+                    for c in &mut d.cache {
+                        c.write = None;
+                    }
+                }
+                self.event(Event::BusDown { link: li, cause });
+            }
+            (LinkState::Down { since_ns, .. }, LinkState::Up) => {
+                for d in self.devices.iter_mut().filter(|d| d.link == li) {
+                    d.dev.bring_up(d.startup, ctx);
+                }
+                self.event(Event::BusUp {
+                    link: li,
+                    outage_ns: ctx.now_ns.saturating_sub(since_ns),
+                });
+            }
+            _ => {}
+        }
+    }
+
+    /// Replies → devices → channel updates → states.
+    fn devices_up(&mut self, tick: u64, ctx: TickCtx) {
         for d in &mut self.devices {
             if !tick.is_multiple_of(d.divisor) {
                 continue;
@@ -422,6 +662,7 @@ impl Stages {
                 d.dev.reply(r, &mut d.updates);
             }
             d.up.clear();
+            d.dev.report(ctx, &mut d.updates);
             self.counters.overflows += d.updates.overflows() - before;
             for u in d.updates.as_slice() {
                 let Some(Some(si)) = d.channel_state.get(u.channel) else {
@@ -442,23 +683,72 @@ impl Stages {
             }
             d.updates.clear();
         }
+    }
 
-        // 8. State stage, upstream.
-        let mut n = 0;
-        for (index, s) in self.states.iter().enumerate() {
-            if !tick.is_multiple_of(s.divisor) || !s.have_value {
-                continue;
+    /// Each device's lifecycle: events on transitions, a fault trips it, its states' flags.
+    fn watch_devices(&mut self, ctx: TickCtx) {
+        for di in 0..self.devices.len() {
+            let st = self.devices[di].dev.status();
+            let was = self.devices[di].status;
+            self.devices[di].status = st;
+            if st.phase != was.phase {
+                self.event(Event::Phase {
+                    device: di,
+                    phase: st.phase,
+                    failure: st.failure,
+                });
+                if st.phase == Phase::Enabled {
+                    self.devices[di].refusal_logged = false;
+                    self.devices[di].watchdog = false;
+                }
+                if st.phase == Phase::Failed && self.devices[di].optional {
+                    self.devices[di].reprobe_ns = Some(ctx.now_ns + REPROBE_NS);
+                }
             }
-            publish(&Publish {
-                index,
-                tick: s.sample_tick,
-                t_sample_ns: s.t_sample_ns,
-                value: s.value,
-                status: s.status(),
-            });
-            n += 1;
+            if st.fault != was.fault {
+                if st.fault == 0 {
+                    self.event(Event::FaultCleared { device: di });
+                } else {
+                    self.counters.faults += 1;
+                    self.event(Event::Fault {
+                        device: di,
+                        bits: st.fault,
+                    });
+                    // A fault is fatal to driving: the device's safe action, now.
+                    if !st.tripped && self.devices[di].safe.is_some() && st.managed() {
+                        self.trip(di, ctx);
+                        self.event(Event::Tripped {
+                            device: di,
+                            cause: TripCause::Fault,
+                        });
+                    }
+                }
+            }
+            if st.safe == SafeProgress::Confirmed && was.safe != SafeProgress::Confirmed {
+                self.event(Event::SafeConfirmed { device: di });
+            }
+            let d = &mut self.devices[di];
+            if let Some(at) = d.reprobe_ns {
+                if ctx.now_ns >= at {
+                    d.reprobe_ns = None;
+                    d.dev.bring_up(d.startup, ctx);
+                }
+            }
+            let st = d.dev.status();
+            let absent = matches!(st.phase, Phase::Offline | Phase::Probing | Phase::Failed);
+            let watchdog = d.watchdog;
+            for s in self.states.iter_mut().filter(|s| s.device == di) {
+                s.disabled = st.managed() && !st.driving();
+                s.tripped = st.tripped;
+                s.fault |= st.fault != 0;
+                if absent {
+                    s.stale = true;
+                }
+                if st.managed() {
+                    s.watchdog = watchdog && st.tripped;
+                }
+            }
         }
-        n
     }
 
     fn check_watchdog(&mut self, sched_ns: u64, ctx: TickCtx) {
@@ -471,49 +761,132 @@ impl Stages {
         }
         w.tripped = true;
         self.counters.watchdog_trips += 1;
-        self.safe_all(ctx, true);
-    }
-
-    /// Every writable device's safe action, sent on this tick whatever the stage divisors.
-    fn safe_all(&mut self, ctx: TickCtx, flag: bool) {
-        for (di, d) in self.devices.iter_mut().enumerate() {
-            let Some(action) = d.safe else { continue };
-            let l = &mut self.links[d.link];
-            // Setpoints still waiting in the caches would undo the safe action.
-            for c in &mut d.cache {
-                c.write = None;
+        for di in 0..self.devices.len() {
+            let d = &self.devices[di];
+            // Devices already tripped (or limp by their own choice) stay as they are.
+            if d.safe.is_none() || d.status.tripped {
+                continue;
             }
-            let before = l.requests.overflows();
-            d.dev.safe(action, ctx, &mut l.requests);
-            self.counters.overflows += l.requests.overflows() - before;
-            l.urgent = true;
+            self.trip(di, ctx);
+            self.devices[di].watchdog = true;
             for s in self.states.iter_mut().filter(|s| s.device == di) {
-                s.pending = None;
-                if flag {
-                    s.watchdog = true;
-                }
+                s.watchdog = true;
+            }
+            if self.devices[di].status.managed() {
+                self.event(Event::Tripped {
+                    device: di,
+                    cause: TripCause::Watchdog,
+                });
             }
         }
     }
 
-    /// Orderly stop, step 1: queue every writable device's safe action (flushed by
-    /// [`flush_links`](Self::flush_links)).
-    pub fn begin_shutdown(&mut self, ctx: TickCtx) {
-        self.safe_all(ctx, false);
+    /// Device `di`'s safe action as a trip: ahead of anything queued on its bus, sent this tick
+    /// whatever the divisors; setpoints refused until it is enabled again.
+    fn trip(&mut self, di: usize, ctx: TickCtx) {
+        self.act(di, ctx, true);
     }
 
-    /// Encodes, exchanges and decodes on every link now, whatever the divisors (used while
-    /// stopping, so that safe actions reach the bus).
-    pub fn flush_links(&mut self, ctx: TickCtx) {
-        for l in &mut self.links {
+    /// Device `di`'s safe action (`trip`: latched until re-enabled).
+    fn act(&mut self, di: usize, ctx: TickCtx, trip: bool) {
+        let d = &mut self.devices[di];
+        let Some(action) = d.safe else { return };
+        let l = &mut self.links[d.link];
+        if !l.urgent {
+            // Queued traffic would go first otherwise.
+            l.link.preempt();
+            l.requests.clear();
+            l.urgent = true;
+        }
+        // Setpoints still waiting in the caches would undo the safe action.
+        for c in &mut d.cache {
+            c.write = None;
+        }
+        let before = l.requests.overflows();
+        if trip {
+            d.dev.trip(action, ctx, &mut l.requests);
+        } else {
+            d.dev.safe(action, ctx, &mut l.requests);
+        }
+        self.counters.overflows += l.requests.overflows() - before;
+        for s in self.states.iter_mut().filter(|s| s.device == di) {
+            s.pending = None;
+        }
+    }
+
+    /// Orderly stop, step 1: every writable device's safe action, ahead of anything queued.
+    /// Then call [`stop_tick`](Self::stop_tick) until [`stopped`](Self::stopped).
+    pub fn begin_shutdown(&mut self, ctx: TickCtx) {
+        for di in 0..self.devices.len() {
+            self.act(di, ctx, false);
+        }
+    }
+
+    /// One tick while stopping: no samples or setpoints, only the devices' own requests (safe
+    /// action retries), the links, and the replies that confirm the actions.
+    pub fn stop_tick(&mut self, ctx: TickCtx) {
+        for d in &mut self.devices {
+            let out = &mut self.links[d.link].requests;
+            d.dev.flush(ctx, out);
+        }
+        for li in 0..self.links.len() {
+            let l = &mut self.links[li];
+            l.link.receive(ctx);
             l.link.encode(l.requests.as_slice(), ctx);
             l.requests.clear();
             if l.link.exchange(ctx).is_err() {
                 self.counters.hw_errors += 1;
             }
-            l.link.decode(&mut l.replies, ctx);
-            l.replies.clear();
+            self.route_replies(li, ctx);
+            self.watch_link(li, ctx);
         }
+        for d in &mut self.devices {
+            for r in d.up.as_slice() {
+                d.dev.reply(r, &mut d.updates);
+            }
+            d.up.clear();
+            d.updates.clear();
+            d.status = d.dev.status();
+        }
+    }
+
+    /// Whether every safe action that can still be confirmed has been, and every link has
+    /// flushed what it took.
+    pub fn stopped(&self) -> bool {
+        let waiting = self.devices.iter().any(|d| {
+            d.safe.is_some()
+                && d.status.safe == SafeProgress::Pending
+                && self.links[d.link].state == LinkState::Up
+                && !matches!(d.status.phase, Phase::Offline | Phase::Probing | Phase::Failed)
+        });
+        !waiting && self.links.iter().all(|l| l.link.flushed())
+    }
+
+    /// The devices whose safe action was not confirmed on the wire (managed devices with a
+    /// safe action), with why: `None` means it got no confirmation in time.
+    pub fn unconfirmed(&self) -> impl Iterator<Item = (usize, Unconfirmed)> + '_ {
+        self.devices.iter().enumerate().filter_map(|(i, d)| {
+            if d.safe.is_none() || !d.status.managed() || d.status.safe == SafeProgress::Confirmed
+            {
+                return None;
+            }
+            let why = if self.links[d.link].state != LinkState::Up {
+                Unconfirmed::BusDown
+            } else if matches!(d.status.phase, Phase::Offline | Phase::Probing | Phase::Failed) {
+                Unconfirmed::NotUp
+            } else {
+                Unconfirmed::NoAnswer
+            };
+            Some((i, why))
+        })
+    }
+
+    /// Devices without a lifecycle that have a safe action (sent, never confirmed).
+    pub fn unmanaged_with_safe_action(&self) -> usize {
+        self.devices
+            .iter()
+            .filter(|d| d.safe.is_some() && !d.status.managed())
+            .count()
     }
 
     /// Orderly stop, last step: quiet every hardware.
@@ -523,13 +896,22 @@ impl Stages {
         }
     }
 
+    /// Every event since the last call, oldest first.
+    pub fn drain_events(&mut self, mut f: impl FnMut(&Event)) {
+        for e in self.events.as_slice() {
+            f(e);
+        }
+        self.events.clear();
+    }
+
     /// Counters since start.
     pub fn counters(&self) -> Counters {
         self.counters
     }
 
-    /// Bus errors: protocol errors (rejected packets, missing replies, dropped requests) of every
-    /// link, transport errors, unmatched replies and queue overflows.
+    /// Bus errors: protocol and hardware errors of every link (rejected packets, missing
+    /// replies, dropped requests, adapter refusals and timeouts, transport errors), unmatched
+    /// replies and queue overflows.
     pub fn bus_errors(&self) -> u64 {
         let c = &self.counters;
         self.links
@@ -541,6 +923,24 @@ impl Stages {
             + c.overflows
     }
 
+    /// Health of the subsystem's buses and devices, for the stats.
+    pub fn health(&self) -> Health {
+        let mut h = Health::default();
+        for l in &self.links {
+            let c = l.link.counters();
+            h.outages += c.outages;
+            h.late_replies += c.protocol.late_replies;
+            h.links_down += u32::from(l.state != LinkState::Up);
+        }
+        for d in &self.devices {
+            h.devices += 1;
+            h.enabled += u32::from(d.status.phase == Phase::Enabled);
+            h.tripped += u32::from(d.status.tripped);
+            h.faulted += u32::from(d.status.fault != 0);
+        }
+        h
+    }
+
     /// States currently flagged stale.
     pub fn stale_states(&self) -> u32 {
         self.states.iter().filter(|s| s.stale).count() as u32
@@ -550,6 +950,56 @@ impl Stages {
     pub fn watchdog_tripped(&self) -> bool {
         self.watchdog.tripped
     }
+
+    /// Every device's status (as of the end of the last tick).
+    pub fn device_status(&self) -> impl Iterator<Item = DeviceStatus> + '_ {
+        self.devices.iter().map(|d| d.status)
+    }
+
+    /// Whether every device has finished its bring-up (enabled, limp, or failed).
+    pub fn settled(&self) -> bool {
+        self.started && self.devices.iter().all(|d| d.status.phase.is_settled())
+    }
+
+    /// One line describing device `i` (model, read layout, configuration); off the RT path.
+    pub fn describe(&self, i: usize) -> String {
+        self.devices[i].dev.describe()
+    }
+
+    /// Each link's state.
+    pub fn link_states(&self) -> impl Iterator<Item = LinkState> + '_ {
+        self.links.iter().map(|l| l.state)
+    }
+}
+
+/// Why a safe action could not be confirmed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unconfirmed {
+    /// Its bus is gone.
+    BusDown,
+    /// The device is not up (never answered, or being brought up again).
+    NotUp,
+    /// It did not confirm within the time allowed.
+    NoAnswer,
+}
+
+/// Health of a subsystem's buses and devices.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Health {
+    /// Times a bus vanished.
+    pub outages: u64,
+    /// Late replies (counted and dropped).
+    pub late_replies: u64,
+    /// Buses down now.
+    pub links_down: u32,
+    /// Devices.
+    pub devices: u32,
+    /// Devices enabled.
+    pub enabled: u32,
+    /// Devices tripped.
+    pub tripped: u32,
+    /// Devices reporting a fault.
+    pub faulted: u32,
 }
 
 /// Queue sizes per link, from the manifest: how many requests its devices can queue between two

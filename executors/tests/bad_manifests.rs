@@ -17,6 +17,7 @@ const TEST_SERIAL: KindSpec = KindSpec {
     medium: Some(Medium::Bytes),
     resource: Some("port"),
     protocols: &[],
+    safe_actions: &[],
     params: &[ParamSpec {
         name: "port",
         ty: ParamType::Str,

@@ -8,7 +8,8 @@ use std::rc::Rc;
 use conductor_bus::{status, Setpoint};
 use conductor_devices::kinds::{build_device, build_link, Capacity};
 use conductor_devices::{
-    Bounded, Credential, HwError, Link, Op, ProtocolCounters, Reply, ReplyData, Request, TickCtx,
+    Bounded, Credential, HwError, Link, LinkCounters, LinkState, Op, Reply, ReplyData, Request,
+    TickCtx,
 };
 use conductor_executor::manifest::{Manifest, Subsystem};
 use conductor_executor::stages::{Publish, Stages};
@@ -26,6 +27,9 @@ struct Recorder {
 }
 
 impl Link for Recorder {
+    fn receive(&mut self, ctx: TickCtx) {
+        self.inner.receive(ctx);
+    }
     fn encode(&mut self, requests: &[Request], ctx: TickCtx) {
         self.log.borrow_mut().push((ctx.tick, requests.to_vec()));
         self.inner.encode(requests, ctx);
@@ -39,8 +43,17 @@ impl Link for Recorder {
             out.push(r).unwrap();
         }
     }
-    fn counters(&self) -> ProtocolCounters {
+    fn counters(&self) -> LinkCounters {
         self.inner.counters()
+    }
+    fn preempt(&mut self) {
+        self.inner.preempt();
+    }
+    fn flushed(&self) -> bool {
+        self.inner.flushed()
+    }
+    fn state(&self) -> LinkState {
+        self.inner.state()
     }
     fn shutdown(&mut self) {
         self.inner.shutdown();
@@ -312,18 +325,8 @@ fn replies_reach_devices_by_credential_and_strangers_are_counted() {
     rig.step();
     // A reply from id 7 (no such device) and one for device 2 (index 1) with a value.
     rig.inject[0].borrow_mut().extend([
-        Reply {
-            cred: Credential::id(7),
-            data: ReplyData::Value(3.0),
-            tick: 1,
-            t_sample_ns: MS,
-        },
-        Reply {
-            cred: Credential::id(2),
-            data: ReplyData::Value(0.25),
-            tick: 1,
-            t_sample_ns: 123,
-        },
+        Reply::answer(Credential::id(7), Op::Sample, ReplyData::Value(3.0), 1, MS),
+        Reply::answer(Credential::id(2), Op::Sample, ReplyData::Value(0.25), 1, 123),
     ]);
     let out = rig.step();
     assert_eq!(rig.stages.counters().unmatched_replies, 1);
@@ -425,7 +428,7 @@ fn shutdown_puts_writable_devices_in_their_safe_state() {
         now_ns: rig.tick * MS,
     };
     rig.stages.begin_shutdown(ctx);
-    rig.stages.flush_links(ctx);
+    rig.stages.stop_tick(ctx);
     let log = rig.logs[0].borrow();
     let (_, last) = log.last().unwrap();
     // The sim device's torque-off is a setpoint of 0.

@@ -15,7 +15,7 @@ mod validate;
 use std::path::{Path, PathBuf};
 
 use conductor_devices::kinds::{KindSpec, Params, KINDS};
-use conductor_devices::{Channel, Credential};
+use conductor_devices::{Channel, Credential, Startup};
 
 pub use diag::Diagnostic;
 
@@ -36,6 +36,8 @@ pub const DEVICE_KEYS: &[&str] = &[
     "safe_action",
     "safe_value",
     "safe_state",
+    "startup",
+    "optional",
 ];
 /// Keys of a state table.
 pub const STATE_KEYS: &[&str] = &[
@@ -284,6 +286,12 @@ pub enum SafeSpec {
     Hold,
     /// Disable the actuator.
     TorqueOff,
+    /// Let the joint move, braked: zero stiffness, velocity gain `kd` (MIT motors; `None`: the
+    /// device's own kd).
+    Damp {
+        /// Velocity gain (N·m·s/rad).
+        kd: Option<f64>,
+    },
     /// Command `value` (state units) on `state` (index into [`Subsystem::states`]).
     Setpoint {
         /// The state whose channel and calibration carry the setpoint.
@@ -314,6 +322,10 @@ pub struct DeviceDef {
     pub params: Params,
     /// The channels the device offers (read from a device built during validation).
     pub channels: Vec<Channel>,
+    /// What it does once brought up: enable from where it is, or stay limp until commanded.
+    pub startup: Startup,
+    /// A device that does not answer at start is a warning and STALE states, not an error.
+    pub optional: bool,
 }
 
 /// A state component.

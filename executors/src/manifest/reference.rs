@@ -23,6 +23,7 @@ fn default_text(d: Option<ParamDefault>) -> String {
         Some(ParamDefault::Float(v)) => format!("{v}"),
         Some(ParamDefault::Bool(v)) => v.to_string(),
         Some(ParamDefault::Str(v)) => format!("`{v:?}`"),
+        Some(ParamDefault::Unset) => "unset (left as the device has it)".into(),
     }
 }
 

@@ -3,7 +3,7 @@
 use std::ops::Range;
 
 use conductor_devices::kinds::{self, Medium, Stage};
-use conductor_devices::Credential;
+use conductor_devices::{Credential, Startup};
 
 use super::super::diag::one_of;
 use super::super::reader::{At, Table};
@@ -211,65 +211,105 @@ pub(super) fn device(
     }
     let calibration = calibration(&mut cx.d, t, Calibration::default());
     let div = divisor(&mut cx.d, t, base);
-    // Safe action.
+    // Safe action: one of those the kind can carry out, its declared one by default.
     let action = t.str(&mut cx.d, "safe_action");
     let value = t.num(
         &mut cx.d,
         "safe_value",
         (f64::MIN, f64::MAX),
-        "a finite number (state units)",
+        "a finite number (state units; for damp: the velocity gain kd)",
     );
-    let safe_state = t.str(&mut cx.d, "safe_state");
-    let mut safe = Some(SafeSpec::Hold);
+    let mut safe_state = t.str(&mut cx.d, "safe_state");
+    let supported: &[&str] = match spec {
+        Some(s) if !s.safe_actions.is_empty() => s.safe_actions,
+        _ => &["hold", "torque_off", "setpoint"],
+    };
+    let chosen = action
+        .as_ref()
+        .map_or(supported[0], |a| a.value.as_str())
+        .to_string();
+    let mut safe = None;
     let mut pending = None;
-    match action.as_ref().map(|a| a.value.as_str()) {
-        None | Some("hold") => {}
-        Some("torque_off") => safe = Some(SafeSpec::TorqueOff),
-        Some("setpoint") => match &value {
-            Some(v) => {
-                pending = Some((
-                    safe_state,
-                    v.value,
-                    action.as_ref().map_or(0..0, |a| a.span.clone()),
-                ))
+    let action_span = action.as_ref().map_or(0..0, |a| a.span.clone());
+    if !supported.contains(&chosen.as_str()) {
+        let a = action.as_ref().expect("the default is supported");
+        cx.d.error(
+            &a.span,
+            &t.key_path("safe_action"),
+            format!(
+                "device kind {:?} cannot carry out safe action {:?}; expected one of: {}",
+                spec.map_or("?", |s| s.kind),
+                a.value,
+                one_of(supported)
+            ),
+        );
+    } else {
+        match chosen.as_str() {
+            "hold" => safe = Some(SafeSpec::Hold),
+            "torque_off" => safe = Some(SafeSpec::TorqueOff),
+            "damp" => {
+                safe = Some(SafeSpec::Damp {
+                    kd: value.as_ref().map(|v| v.value),
+                })
             }
-            None => {
-                if t.span_of("safe_value").is_none() {
-                    cx.d.error(
-                        &action.as_ref().map_or(0..0, |a| a.span.clone()),
-                        &t.key_path("safe_value"),
-                        "safe_action = \"setpoint\" needs `safe_value` (the setpoint, in state units)",
-                    );
+            _ => match &value {
+                Some(v) => pending = Some((safe_state.take(), v.value, action_span.clone())),
+                None => {
+                    if t.span_of("safe_value").is_none() {
+                        cx.d.error(
+                            &action_span,
+                            &t.key_path("safe_value"),
+                            "safe_action = \"setpoint\" needs `safe_value` (the setpoint, in state units)",
+                        );
+                    }
                 }
-                safe = None;
+            },
+        }
+    }
+    let takes_value = matches!(chosen.as_str(), "setpoint" | "damp");
+    for key in ["safe_value", "safe_state"] {
+        let allowed = chosen == "setpoint" || (key == "safe_value" && takes_value);
+        if let Some(span) = t.span_of(key) {
+            if !allowed && (safe.is_some() || pending.is_some()) {
+                cx.d.error(
+                    &span,
+                    &t.key_path(key),
+                    format!("`{key}` applies only with safe_action = \"setpoint\" (safe_value also with \"damp\")"),
+                );
             }
-        },
-        Some(_) => {
-            let a = action.as_ref().expect("matched Some");
+        }
+    }
+    if let (Some(SafeSpec::Damp { kd: Some(kd) }), Some(v)) = (safe, value.as_ref()) {
+        if !(0.0..=5.0).contains(&kd) {
             cx.d.error(
-                &a.span,
-                &t.key_path("safe_action"),
-                format!(
-                    "expected one of: hold, torque_off, setpoint; found {:?}",
-                    a.value
-                ),
+                &v.span,
+                &t.key_path("safe_value"),
+                format!("expected a velocity gain kd from 0 to 5 for damp, found {}", fmt_num(kd)),
             );
             safe = None;
         }
     }
-    if pending.is_none() {
-        for key in ["safe_value", "safe_state"] {
-            if let Some(span) = t.span_of(key) {
-                if safe.is_some() {
-                    cx.d.error(
-                        &span,
-                        &t.key_path(key),
-                        format!("`{key}` applies only with safe_action = \"setpoint\""),
-                    );
-                }
+    // Lifecycle.
+    let startup = t.str(&mut cx.d, "startup");
+    let startup = match startup {
+        None => Some(Startup::Enable),
+        Some(s) => match Startup::from_name(&s.value) {
+            Some(v) => Some(v),
+            None => {
+                cx.d.error(
+                    &s.span,
+                    &t.key_path("startup"),
+                    format!(
+                        "expected one of: {}; found {:?}",
+                        one_of(Startup::CHOICES),
+                        s.value
+                    ),
+                );
+                None
             }
-        }
-    }
+        },
+    };
+    let optional = t.bool(&mut cx.d, "optional").is_some_and(|b| b.value);
     let params = spec.and_then(|s| kind_params(&mut cx.d, t, s));
     if spec.is_none() {
         for k in t.keys() {
@@ -295,6 +335,8 @@ pub(super) fn device(
         },
         _ => None,
     };
+    // A setpoint action is resolved (to its state) once the states are known.
+    let safe = safe.or(pending.as_ref().map(|_| SafeSpec::Hold));
     let def = match (
         name_ok,
         spec,
@@ -305,6 +347,7 @@ pub(super) fn device(
         calibration,
         safe,
         channels,
+        startup,
     ) {
         (
             true,
@@ -316,6 +359,7 @@ pub(super) fn device(
             Some(calibration),
             Some(safe),
             Some(channels),
+            Some(startup),
         ) => Some(DeviceDef {
             name: name.value.clone(),
             kind: s.kind.to_string(),
@@ -326,6 +370,8 @@ pub(super) fn device(
             safe,
             params,
             channels,
+            startup,
+            optional,
         }),
         _ => None,
     };
