@@ -7,6 +7,7 @@
 //! typed values, or a [`ManifestError::Invalid`] listing **every** problem with file, line,
 //! column, key and what was expected. The reference for every key is `docs/manifest.md`.
 
+pub mod busload;
 mod diag;
 mod reader;
 pub mod reference;
