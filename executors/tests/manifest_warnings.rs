@@ -1,8 +1,8 @@
 //! Warnings: a manifest with only warnings is valid and carries them in `Manifest::warnings`;
-//! they are rendered like errors, as `warning:`. An actuator nothing commands, and an actuator
-//! the watchdog switches off with no way back on.
+//! they are rendered like errors, as `warning:`. A bus loaded above 80 % of its wire, an
+//! actuator nothing commands, and an actuator the watchdog switches off with no way back on.
 
-use conductor_executor::manifest::{Manifest, Severity};
+use conductor_executor::manifest::{Manifest, ManifestError, Severity};
 
 /// `n` X-series servos on one 1 Mbit/s bus at 250 Hz; each gets `states` with `{i}` replaced.
 fn servos(n: usize, states: &str) -> String {
@@ -25,8 +25,84 @@ fn servos(n: usize, states: &str) -> String {
 const POSITION: &str =
     "[subsystems.arm.states.p{i}]\ndevice = \"s{i}\"\nchannel = \"position\"\nwritable = true\n";
 
+const VELOCITY_CURRENT: &str =
+    "[subsystems.arm.states.v{i}]\ndevice = \"s{i}\"\nchannel = \"velocity\"\n\
+     [subsystems.arm.states.c{i}]\ndevice = \"s{i}\"\nchannel = \"current\"\n";
+
 fn parse(text: &str) -> Manifest {
     Manifest::parse(text, "arm.toml").unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// 12 servos reading position, velocity and current (126..136, 10 bytes) and written their
+/// position at 250 Hz: SYNC WRITE 14 + 12·5 = 74 B, SYNC READ 14 + 12 = 26 B, 12 status packets
+/// of 21 B = 252 B: 352 B = 3.52 ms of each 4 ms cycle, 88 %. Valid, with one warning.
+#[test]
+fn a_bus_above_80_percent_is_a_warning_and_the_manifest_loads() {
+    let text = servos(12, &format!("{POSITION}{VELOCITY_CURRENT}"));
+    let m = parse(&text);
+    assert_eq!(m.subsystems.len(), 1);
+    assert_eq!(m.warnings.len(), 1, "{}", m.render_warnings());
+    let w = &m.warnings[0];
+    assert_eq!(w.severity, Severity::Warning);
+    assert_eq!(w.key, "subsystems.arm.protocols.robotis");
+    // On the protocol's table header.
+    let header = text
+        .lines()
+        .position(|l| l == "[subsystems.arm.protocols.robotis]")
+        .unwrap();
+    assert_eq!((w.line, w.column), (header + 1, 1));
+    for figure in [
+        "bus load 88 % of the wire",
+        "above 80 %",
+        "352 bytes",
+        "SYNC WRITE 74 B, SYNC READ 26 B, 12 status packets 252 B",
+        "in 3.52 ms at 1000000 baud",
+        "250 cycles a second",
+        "880 ms of wire time per second",
+        "fast_sync",
+    ] {
+        assert!(w.message.contains(figure), "{figure:?} in {}", w.message);
+    }
+    let shown = m.render_warnings();
+    assert!(
+        shown.starts_with(&format!(
+            "arm.toml:{}:1: warning: subsystems.arm.protocols.robotis: bus load 88 %",
+            header + 1
+        )),
+        "{shown}"
+    );
+    assert!(
+        shown.ends_with("1 warning in the manifest (it is valid)"),
+        "{shown}"
+    );
+    // Below 80 %: no warning (6 servos: 44 + 20 + 6·21 = 190 B, 47.5 %).
+    let m = parse(&servos(6, &format!("{POSITION}{VELOCITY_CURRENT}")));
+    assert!(m.warnings.is_empty(), "{}", m.render_warnings());
+    assert_eq!(m.render_warnings(), "");
+}
+
+/// Above 100 % the manifest is refused, with the figures; other warnings are still listed.
+#[test]
+fn a_bus_above_100_percent_is_an_error() {
+    let text = servos(24, &format!("{POSITION}{VELOCITY_CURRENT}"));
+    let Err(ManifestError::Invalid { diagnostics }) = Manifest::parse(&text, "arm.toml") else {
+        panic!("accepted");
+    };
+    assert_eq!(diagnostics.len(), 1);
+    assert_eq!(diagnostics[0].severity, Severity::Error);
+    // 14 + 24·5 + 14 + 24 + 24·21 = 676 B = 6.76 ms per 4 ms cycle.
+    assert!(
+        diagnostics[0].message.contains("bus load 169 %"),
+        "{}",
+        diagnostics[0]
+    );
+    assert!(diagnostics[0].message.contains("expected at most 100 %"));
+
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/bad_manifests/24-bus-load-dynamixel.toml");
+    let e = Manifest::load(&path).unwrap_err().to_string();
+    assert!(e.ends_with("1 error and 1 warning in the manifest"), "{e}");
+    assert!(e.contains(": warning: subsystems.arm.devices.s10: "), "{e}");
 }
 
 /// An actuator without a writable state: nothing can command it.

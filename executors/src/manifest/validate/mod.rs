@@ -9,12 +9,14 @@
 //! * [`gateways`]: gateway tables;
 //! * [`fields`]: the checks shared by them (names, rates, kinds and their parameters, links,
 //!   calibration);
+//! * [`load`]: the load of every bus (an error above 100 % of the wire, a warning above 80 %);
 //! * [`actuators`]: warnings about actuators nothing can command or re-enable.
 
 mod actuators;
 mod components;
 mod fields;
 mod gateways;
+mod load;
 
 use std::ops::Range;
 use std::path::Path;
@@ -414,6 +416,7 @@ fn subsystem(cx: &mut Ctx, name: At<String>, mut t: Table) -> Option<Subsystem> 
             })
             .collect()
     };
+    load::check(&mut cx.d, &def, &headers(&proto_tables));
     actuators::check(&mut cx.d, &def, &headers(&dev_tables));
     Some(def)
 }
