@@ -168,3 +168,26 @@ fn gateways_sit_beside_subsystems_with_defaults() {
     assert!(!m.gateway("b2").unwrap().restore);
     assert!(m.gateway("leg").is_none());
 }
+
+/// Every manifest shipped in deploy/ and tests/manifests/ validates without a warning.
+#[test]
+fn shipped_manifests_have_no_warnings() {
+    for dir in ["deploy", "executors/tests/manifests"] {
+        let mut n = 0;
+        for e in std::fs::read_dir(root().join(dir)).unwrap() {
+            let path = e.unwrap().path();
+            if path.extension().is_some_and(|x| x == "toml") {
+                let rel = path
+                    .strip_prefix(root())
+                    .unwrap()
+                    .to_str()
+                    .unwrap()
+                    .to_string();
+                let m = load(&rel);
+                assert!(m.warnings.is_empty(), "{rel}:\n{}", m.render_warnings());
+                n += 1;
+            }
+        }
+        assert!(n > 0, "no manifests in {dir}");
+    }
+}

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::Parser;
-use conductor_executor::launcher::{launch, LaunchError, LaunchOptions};
+use conductor_executor::launcher::{launch, load_manifest, LaunchError, LaunchOptions};
 
 #[derive(Parser)]
 #[command(
@@ -45,7 +45,7 @@ struct Cli {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if cli.check {
-        return match conductor_executor::manifest::Manifest::load(&cli.manifest) {
+        return match load_manifest(&cli.manifest) {
             Ok(m) => {
                 println!(
                     "{}: valid ({} subsystems, {} gateways)",

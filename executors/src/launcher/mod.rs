@@ -285,6 +285,16 @@ impl core::fmt::Debug for Launch {
     }
 }
 
+/// Reads and validates the manifest at `path` and prints its warnings, if any, on stderr (so
+/// that whoever launches or checks a manifest sees them before anything starts).
+pub fn load_manifest(path: &Path) -> Result<Manifest, ManifestError> {
+    let manifest = Manifest::load(path)?;
+    if !manifest.warnings.is_empty() {
+        note!("{}", manifest.render_warnings());
+    }
+    Ok(manifest)
+}
+
 /// Launches and blocks until a stop request (SIGINT/SIGTERM when `handle_signals`), then stops
 /// every executor and gateway. Returns an error as soon as an executor cannot run.
 pub fn launch(manifest: &Path, opts: LaunchOptions) -> Result<LaunchReport, LaunchError> {
@@ -299,7 +309,7 @@ impl Launch {
         if opts.handle_signals {
             signals::install(&stop).map_err(|e| LaunchError::Bus(e.to_string()))?;
         }
-        let manifest = Manifest::load(manifest_path)?;
+        let manifest = load_manifest(manifest_path)?;
         let domain =
             resolve_domain(opts.domain.as_deref(), &manifest).map_err(LaunchError::Domain)?;
         let known: Vec<&str> = manifest

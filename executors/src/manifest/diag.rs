@@ -1,11 +1,23 @@
-//! Diagnostics: one validation error with its file, line, column, key and what was expected.
+//! Diagnostics: one validation error or warning with its file, line, column, key and what was
+//! expected.
 
 use std::fmt;
 use std::ops::Range;
 
+/// How bad a [`Diagnostic`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Severity {
+    /// The manifest cannot be used.
+    Error,
+    /// The manifest is valid, but probably not what was meant (or close to a limit).
+    Warning,
+}
+
 /// One problem found in a manifest.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Diagnostic {
+    /// Error (the manifest is refused) or warning (it is accepted).
+    pub severity: Severity,
     /// The manifest file as given by the caller.
     pub file: String,
     /// 1-based line.
@@ -22,6 +34,9 @@ pub struct Diagnostic {
 impl fmt::Display for Diagnostic {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}:{}:{}: ", self.file, self.line, self.column)?;
+        if self.severity == Severity::Warning {
+            f.write_str("warning: ")?;
+        }
         if !self.key.is_empty() {
             write!(f, "{}: ", self.key)?;
         }
@@ -29,34 +44,46 @@ impl fmt::Display for Diagnostic {
     }
 }
 
-/// Collects errors (with byte spans) while a document is validated.
+/// Collects errors and warnings (with byte spans) while a document is validated.
 #[derive(Debug, Default)]
 pub(crate) struct Diags {
-    items: Vec<(usize, String, String)>,
+    items: Vec<(usize, Severity, String, String)>,
 }
 
 impl Diags {
     /// Records an error at byte offset `span.start` for `key`.
     pub(crate) fn error(&mut self, span: &Range<usize>, key: &str, message: impl Into<String>) {
         self.items
-            .push((span.start, key.to_string(), message.into()));
+            .push((span.start, Severity::Error, key.to_string(), message.into()));
     }
 
-    pub(crate) fn is_empty(&self) -> bool {
-        self.items.is_empty()
+    /// Records a warning at byte offset `span.start` for `key`.
+    pub(crate) fn warning(&mut self, span: &Range<usize>, key: &str, message: impl Into<String>) {
+        self.items.push((
+            span.start,
+            Severity::Warning,
+            key.to_string(),
+            message.into(),
+        ));
+    }
+
+    /// Whether any error (not counting warnings) was recorded.
+    pub(crate) fn has_errors(&self) -> bool {
+        self.items.iter().any(|i| i.1 == Severity::Error)
     }
 
     /// Resolves offsets to lines and columns, sorted by position (stable for equal positions),
     /// without duplicates.
     pub(crate) fn finish(self, file: &str, source: &str) -> Vec<Diagnostic> {
         let mut items = self.items;
-        items.sort_by_key(|(pos, _, _)| *pos);
+        items.sort_by_key(|(pos, _, _, _)| *pos);
         items.dedup();
         items
             .into_iter()
-            .map(|(pos, key, message)| {
+            .map(|(pos, severity, key, message)| {
                 let (line, column) = line_column(source, pos);
                 Diagnostic {
+                    severity,
                     file: file.to_string(),
                     line,
                     column,
@@ -169,6 +196,20 @@ mod tests {
         // 'µ' is two bytes: the '=' after it is character 3 of line 2.
         assert_eq!(line_column(s, 9), (2, 3));
         assert_eq!(line_column(s, 1000), (3, 1));
+    }
+
+    #[test]
+    fn warnings_render_as_warning_and_are_not_errors() {
+        let src = "a = 1\nb = 2\n";
+        let mut d = Diags::default();
+        d.warning(&(6..7), "b", "doubtful");
+        assert!(!d.has_errors());
+        d.error(&(0..1), "a", "wrong");
+        assert!(d.has_errors());
+        let all = d.finish("f.toml", src);
+        assert_eq!(all[0].to_string(), "f.toml:1:1: a: wrong");
+        assert_eq!(all[1].severity, Severity::Warning);
+        assert_eq!(all[1].to_string(), "f.toml:2:1: warning: b: doubtful");
     }
 
     #[test]

@@ -7,6 +7,7 @@
 //! typed values, or a [`ManifestError::Invalid`] listing **every** problem with file, line,
 //! column, key and what was expected. The reference for every key is `docs/manifest.md`.
 
+pub mod busload;
 mod diag;
 mod reader;
 pub mod reference;
@@ -17,7 +18,7 @@ use std::path::{Path, PathBuf};
 use conductor_devices::kinds::{KindSpec, Params, KINDS};
 use conductor_devices::{Channel, Credential, Startup};
 
-pub use diag::Diagnostic;
+pub use diag::{Diagnostic, Severity};
 
 /// Keys a hardware table accepts besides its kind's parameters.
 pub const HARDWARE_KEYS: &[&str] = &["kind", "rate_hz"];
@@ -102,7 +103,7 @@ pub enum ManifestError {
     /// The manifest is not valid; every problem is listed.
     #[error("{}", render(.diagnostics))]
     Invalid {
-        /// Every problem found, in document order.
+        /// Every problem found, in document order: at least one error, and any warnings.
         diagnostics: Vec<Diagnostic>,
     },
 }
@@ -113,11 +114,17 @@ fn render(diagnostics: &[Diagnostic]) -> String {
         s.push_str(&d.to_string());
         s.push('\n');
     }
-    let n = diagnostics.len();
-    s.push_str(&format!(
-        "{n} error{} in the manifest",
-        if n == 1 { "" } else { "s" }
-    ));
+    let plural = |n: usize| if n == 1 { "" } else { "s" };
+    let warnings = diagnostics
+        .iter()
+        .filter(|d| d.severity == Severity::Warning)
+        .count();
+    let errors = diagnostics.len() - warnings;
+    s.push_str(&format!("{errors} error{} ", plural(errors)));
+    if warnings > 0 {
+        s.push_str(&format!("and {warnings} warning{} ", plural(warnings)));
+    }
+    s.push_str("in the manifest");
     s
 }
 
@@ -134,6 +141,9 @@ pub struct Manifest {
     pub subsystems: Vec<Subsystem>,
     /// Gateways in document order; each runs as one gateway process.
     pub gateways: Vec<GatewayDef>,
+    /// What validation found doubtful but not wrong (a bus loaded above 80 %, an actuator
+    /// nothing can command, ...), in document order; see [`Manifest::render_warnings`].
+    pub warnings: Vec<Diagnostic>,
 }
 
 /// What program a gateway runs.
@@ -393,6 +403,24 @@ impl Manifest {
     ) -> Result<Self, ManifestError> {
         let path = path.as_ref();
         validate::validate(source, path, kinds)
+    }
+
+    /// The warnings, one per line as `file:line:column: warning: key: message`, and a count;
+    /// empty when there are none.
+    pub fn render_warnings(&self) -> String {
+        let mut s = String::new();
+        for w in &self.warnings {
+            s.push_str(&w.to_string());
+            s.push('\n');
+        }
+        let n = self.warnings.len();
+        if n > 0 {
+            s.push_str(&format!(
+                "{n} warning{} in the manifest (it is valid)",
+                if n == 1 { "" } else { "s" }
+            ));
+        }
+        s
     }
 
     /// The subsystem called `name`.

@@ -6,8 +6,7 @@ use std::ffi::OsString;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use conductor_executor::launcher::{launch, LaunchError, LaunchOptions};
-use conductor_executor::manifest::Manifest;
+use conductor_executor::launcher::{launch, load_manifest, LaunchError, LaunchOptions};
 
 use crate::cli::LaunchArgs;
 
@@ -18,7 +17,7 @@ const EXIT_MANIFEST: u8 = 2;
 /// any other thread exists: the launcher takes SIGINT/SIGTERM over with a `sigwait` thread.
 pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
     if a.check {
-        return match Manifest::load(&a.manifest) {
+        return match load_manifest(&a.manifest) {
             Ok(m) => {
                 println!(
                     "{}: valid ({} subsystems, {} gateways)",

@@ -8,11 +8,15 @@
 //! * [`components`]: hardware, protocol, device and state tables;
 //! * [`gateways`]: gateway tables;
 //! * [`fields`]: the checks shared by them (names, rates, kinds and their parameters, links,
-//!   calibration).
+//!   calibration);
+//! * [`load`]: the load of every bus (an error above 100 % of the wire, a warning above 80 %);
+//! * [`actuators`]: warnings about actuators nothing can command or re-enable.
 
+mod actuators;
 mod components;
 mod fields;
 mod gateways;
+mod load;
 
 use std::ops::Range;
 use std::path::Path;
@@ -124,7 +128,7 @@ pub(super) fn validate(
     check_gateway_names(&mut cx, &subsystem_names, &gateway_names);
     check_resources(&mut cx);
 
-    if !cx.d.is_empty() {
+    if cx.d.has_errors() {
         return Err(ManifestError::Invalid {
             diagnostics: cx.d.finish(&file, source),
         });
@@ -135,6 +139,7 @@ pub(super) fn validate(
         domain: domain.map(|d| d.value),
         subsystems: subsystems.into_iter().flatten().collect(),
         gateways: gateways.into_iter().flatten().collect(),
+        warnings: cx.d.finish(&file, source),
     })
 }
 
@@ -386,7 +391,7 @@ fn subsystem(cx: &mut Ctx, name: At<String>, mut t: Table) -> Option<Subsystem> 
     if !ok {
         return None;
     }
-    Some(Subsystem {
+    let def = Subsystem {
         name: name.value,
         rate_hz: base?,
         period_ns: period_ns?,
@@ -399,7 +404,21 @@ fn subsystem(cx: &mut Ctx, name: At<String>, mut t: Table) -> Option<Subsystem> 
         protocols: protos.into_iter().filter_map(|p| p.def).collect(),
         devices: devs.into_iter().flatten().collect(),
         states: states.into_iter().flatten().collect(),
-    })
+    };
+    // Checks of the built subsystem, reported on the component's table header.
+    let headers = |tables: &[(At<String>, Option<Table>)]| -> Vec<(Range<usize>, String)> {
+        tables
+            .iter()
+            .map(|(n, t)| {
+                t.as_ref().map_or((n.span.clone(), String::new()), |t| {
+                    (t.span.clone(), t.path.clone())
+                })
+            })
+            .collect()
+    };
+    load::check(&mut cx.d, &def, &headers(&proto_tables));
+    actuators::check(&mut cx.d, &def, &headers(&dev_tables));
+    Some(def)
 }
 
 /// A gateway publishes the subsystem of its name: no subsystem may have it too.
