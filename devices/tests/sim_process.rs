@@ -147,7 +147,8 @@ fn drive<D: Device>(
 
 #[test]
 fn dynamixel_process_over_a_pty_at_250_hz() {
-    let mut sim = Sim::spawn(&["dxl", "--servos", "6"]);
+    // About bundling and timing, not power-on: the servos start with torque on.
+    let mut sim = Sim::spawn(&["dxl", "--servos", "6", "--torque-on"]);
     let hw = SerialHardware::open(sim.link.to_str().unwrap(), &SerialOptions::default()).unwrap();
     let timing = Timing {
         baud: 1_000_000,
@@ -285,6 +286,8 @@ fn dynamixel_over_udp() {
         DxlSimConfig {
             ids: vec![1, 2, 3],
             tau_s: 0.0,
+            // About the transport, not power-on: the servos follow their goals.
+            torque_on: true,
             ..DxlSimConfig::default()
         },
         FaultConfig::default(),

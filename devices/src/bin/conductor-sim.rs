@@ -92,6 +92,12 @@ enum Cmd {
         /// Time constant of the position response (s).
         #[arg(long, default_value_t = 0.05)]
         tau: f64,
+        /// Power up with torque on (legacy; a real servo powers up with torque off).
+        #[arg(long)]
+        torque_on: bool,
+        /// Model number every servo reports (1020 = XM430-W350).
+        #[arg(long, default_value_t = 1020)]
+        model: u16,
         #[command(flatten)]
         faults: Faults,
     },
@@ -154,7 +160,8 @@ fn dxl_stats(sim: &DxlBusSim) -> String {
         "{{\"bytes_in\": {}, \"packets_in\": {}, \"discarded_in\": {}, \"rejected_in\": {}, \
          \"ping\": {}, \"read\": {}, \"write\": {}, \"sync_read\": {}, \"fast_sync_read\": {}, \
          \"sync_write\": {}, \"sync_write_bytes\": {}, \"bulk_read\": {}, \"bulk_write\": {}, \
-         \"packets_out\": {}, \"bytes_out\": {}, \"ids\": [{}], \"present\": [{}], \"goal\": [{}]}}",
+         \"reboot\": {}, \"packets_out\": {}, \"bytes_out\": {}, \"ids\": [{}], \"present\": [{}], \
+         \"goal\": [{}], \"torque\": [{}], \"hardware_error\": [{}]}}",
         s.bytes_in,
         s.packets_in,
         s.discarded_in,
@@ -168,11 +175,17 @@ fn dxl_stats(sim: &DxlBusSim) -> String {
         s.sync_write_bytes,
         s.bulk_read,
         s.bulk_write,
+        s.reboot,
         s.packets_out,
         s.bytes_out,
-        ids.iter().map(|i| i.to_string()).collect::<Vec<_>>().join(","),
+        ids.iter()
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
         list(&|id| sim.servo(id).map_or(0, |s| s.present_position())),
         list(&|id| sim.servo(id).map_or(0, |s| s.goal_position())),
+        list(&|id| sim.servo(id).map_or(0, |s| s.torque_on() as i32)),
+        list(&|id| sim.servo(id).map_or(0, |s| s.hardware_error() as i32)),
     )
 }
 
@@ -243,6 +256,8 @@ fn main() {
             return_delay_us,
             no_baud_timing,
             tau,
+            torque_on,
+            model,
             faults: f,
         } => endpoint(&at).map(|(ep, desc)| {
             let cfg = DxlSimConfig {
@@ -255,6 +270,8 @@ fn main() {
                 return_delay_us,
                 baud_timing: !no_baud_timing,
                 tau_s: tau,
+                torque_on,
+                model,
                 ..DxlSimConfig::default()
             };
             let faults = FaultConfig {

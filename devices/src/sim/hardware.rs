@@ -80,6 +80,12 @@ impl DxlSimHardware {
         &self.sim
     }
 
+    /// The simulator, to change it behind the host's back (e.g.
+    /// `sim_mut().servo_mut(id)` to inject a hardware error or move a limp shaft).
+    pub fn sim_mut(&mut self) -> &mut DxlBusSim {
+        &mut self.sim
+    }
+
     /// The simulator's counters.
     pub fn stats(&self) -> DxlSimStats {
         self.sim.stats()
