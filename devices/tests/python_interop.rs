@@ -154,15 +154,34 @@ fn python_can_slcan_sends_and_receives_mit_frames() {
         "MIT replies go to the master ID"
     );
     assert_eq!(field(&json, "enter_reply_dlc"), "6");
+    // Position quantum: 25 rad / 65 535.
+    let at_rest = |p: f64| p.abs() < 1e-3;
+    let before = numbers(&field(&json, "before_enter"));
+    assert!(
+        before.iter().all(|&p| at_rest(p)),
+        "ignored before Enter: {before:?}"
+    );
+    let after_enter: f64 = field(&json, "after_enter").parse().unwrap();
+    assert!(at_rest(after_enter), "Enter gives no torque: {after_enter}");
     let p = numbers(&field(&json, "positions_first_last"));
-    assert!(p[0].abs() < 1e-3, "starts at rest: {p:?}");
+    assert!(at_rest(p[0]), "starts at rest: {p:?}");
     // 300 commands 2 ms apart with kp = 20, kd = 1: settled near 1 rad.
     assert!((p[1] - 1.0).abs() < 0.01, "{p:?}");
+    let after_exit = numbers(&field(&json, "after_exit"));
+    assert!(
+        after_exit.iter().all(|&q| (q - p[1]).abs() < 0.01),
+        "ignored after Exit: {after_exit:?}"
+    );
     assert_eq!(field(&json, "odrive_reply_id"), (4 * 32 + 9).to_string());
     assert_eq!(numbers(&field(&json, "odrive_estimates")), [0.0, 0.0]);
     let a = sim.sim();
     let s = a.stats();
-    assert_eq!(s.frames_from_host, 1 + 300 + 1 + 1);
+    assert_eq!(s.frames_from_host, 2 + 2 + 300 + 1 + 2 + 1);
     assert_eq!(s.frames_to_host, s.frames_from_host, "every frame answered");
-    assert!(!a.nodes()[0].snapshot().enabled, "exit frame honoured");
+    let motor = a.nodes()[0].snapshot();
+    assert!(!motor.enabled, "exit frame honoured");
+    assert_eq!(
+        motor.ignored, 4,
+        "two commands before Enter, two after Exit"
+    );
 }

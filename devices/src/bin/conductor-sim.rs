@@ -197,8 +197,9 @@ fn slcan_stats(a: &SlcanAdapterSim) -> String {
         .map(|n| {
             let s = n.snapshot();
             format!(
-                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}}}",
-                s.id, s.position, s.enabled, s.frames_in
+                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}, \
+                 \"fault\": {}, \"ignored\": {}}}",
+                s.id, s.position, s.enabled, s.frames_in, s.fault, s.ignored
             )
         })
         .collect::<Vec<_>>()

@@ -202,6 +202,11 @@ impl CanSimHardware {
         }
     }
 
+    /// The nodes, to inject faults behind the host's back ([`CanNode::set_fault`]).
+    pub fn nodes_mut(&mut self) -> &mut [Box<dyn CanNode>] {
+        &mut self.nodes
+    }
+
     /// The nodes' states.
     pub fn snapshots(&self) -> Vec<NodeSnapshot> {
         self.nodes.iter().map(|n| n.snapshot()).collect()
