@@ -259,7 +259,9 @@ impl Hardware for CanSimHardware {
 }
 
 /// The SLCAN adapter simulator as byte hardware (the serial side of a USB-CAN adapter), for
-/// running [`crate::hw::SlcanHardware`] in process. Answers are available at once.
+/// running [`crate::hw::SlcanHardware`] in process. Answers are available at once, or after
+/// the adapter's latency or stall ([`SlcanAdapterSim::set_latency`],
+/// [`SlcanAdapterSim::stall_until`]).
 #[derive(Debug)]
 pub struct SlcanSimPort {
     adapter: SlcanAdapterSim,
@@ -282,6 +284,11 @@ impl SlcanSimPort {
     /// The adapter.
     pub fn adapter(&self) -> &SlcanAdapterSim {
         &self.adapter
+    }
+
+    /// The adapter, to make it lag, stall or drop acks, or to reach its nodes.
+    pub fn adapter_mut(&mut self) -> &mut SlcanAdapterSim {
+        &mut self.adapter
     }
 
     /// The adapter's counters.
