@@ -36,6 +36,8 @@ impl Rig {
         let sim = DxlSimConfig {
             ids: (1..=n).collect(),
             baud: BAUD,
+            // These tests are about bundling, not power-on: the servos follow their goals.
+            torque_on: true,
             ..DxlSimConfig::default()
         };
         let hw = DxlSimHardware::new(sim, down, up).with_log();

@@ -31,10 +31,13 @@ struct Sim {
 
 impl Sim {
     fn spawn(args: &[&str]) -> Self {
+        // One directory per simulator: the tests of this file run in parallel.
+        static N: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let dir = std::env::temp_dir().join(format!(
-            "conductor-sim-test-{}-{}",
+            "conductor-sim-test-{}-{}-{}",
             std::process::id(),
-            args[0]
+            args[0],
+            N.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
         ));
         std::fs::create_dir_all(&dir).unwrap();
         let link = dir.join("tty");
@@ -62,10 +65,15 @@ impl Sim {
     }
 
     fn stats(&mut self) -> String {
-        writeln!(self.stdin, "stats").unwrap();
-        let mut line = String::new();
-        self.stdout.read_line(&mut line).unwrap();
-        line
+        self.cmd("stats")
+    }
+
+    /// Sends one command line; returns the one line it is answered with.
+    fn cmd(&mut self, line: &str) -> String {
+        writeln!(self.stdin, "{line}").unwrap();
+        let mut answer = String::new();
+        self.stdout.read_line(&mut answer).unwrap();
+        answer.trim_end().to_string()
     }
 }
 
@@ -149,7 +157,8 @@ fn drive<D: Device>(
 
 #[test]
 fn dynamixel_process_over_a_pty_at_250_hz() {
-    let mut sim = Sim::spawn(&["dxl", "--servos", "6"]);
+    // About bundling and timing, not power-on: the servos start with torque on.
+    let mut sim = Sim::spawn(&["dxl", "--servos", "6", "--torque-on"]);
     let hw = SerialHardware::open(sim.link.to_str().unwrap(), &SerialOptions::default()).unwrap();
     let timing = Timing {
         baud: 1_000_000,
@@ -291,6 +300,8 @@ fn dynamixel_over_udp() {
         DxlSimConfig {
             ids: vec![1, 2, 3],
             tau_s: 0.0,
+            // About the transport, not power-on: the servos follow their goals.
+            torque_on: true,
             ..DxlSimConfig::default()
         },
         FaultConfig::default(),
@@ -335,4 +346,106 @@ fn dynamixel_over_udp() {
     // τ = 0: the servos are at the goal (−0.5 rad → 2048 − 326 pulses) exactly.
     let want = (2048 - 326 - 2048) as f64 * 2.0 * std::f64::consts::PI / 4096.0;
     assert_eq!(last, [Some(want); 3]);
+}
+
+/// The stdin commands of `conductor-sim dxl`: a hardware error shows in the stats, the
+/// adapter is unplugged (the link disappears) and plugged back (a fresh open talks to the same
+/// servos), and commands that do not apply are refused with a reason.
+#[test]
+fn dynamixel_process_commands() {
+    use conductor_protocols::dynamixel2::{self as dxl, Scanner, Status};
+    use std::io::Read;
+
+    let mut sim = Sim::spawn(&["dxl", "--servos", "2", "--model", "1060"]);
+    assert_eq!(sim.cmd("fault 2 0x20"), "ok");
+    let s = sim.stats();
+    assert_eq!(field(&s, "hardware_error"), "[0,32]");
+    assert_eq!(field(&s, "torque"), "[0,0]");
+    assert!(sim.cmd("fault 9 1").starts_with("error no servo 9"));
+    assert!(sim.cmd("fault 1").starts_with("error usage"));
+    assert!(sim.cmd("stall 10").starts_with("error"));
+    assert!(sim.cmd("clear 2").starts_with("error"));
+    assert!(sim.cmd("frobnicate").starts_with("error"));
+    assert_eq!(sim.cmd("unplug"), "ok");
+    assert!(std::fs::symlink_metadata(&sim.link).is_err());
+    assert_eq!(sim.cmd("replug"), "ok");
+    assert!(sim.cmd("replug").starts_with("error"), "already plugged");
+    let mut port = serialport::new(sim.link.to_str().unwrap(), 1_000_000)
+        .timeout(Duration::from_secs(2))
+        .open_native()
+        .unwrap();
+    let mut buf = [0u8; 64];
+    let n = dxl::ping(&mut buf, 2).unwrap();
+    port.write_all(&buf[..n]).unwrap();
+    let mut scanner = Scanner::<256>::new();
+    let status = loop {
+        let k = port.read(&mut buf).unwrap();
+        scanner.push(&buf[..k]);
+        if let Some(p) = scanner.next_packet() {
+            let s = Status::from_packet(&p).unwrap();
+            break (s.error.0, s.data.to_vec());
+        }
+    };
+    // The Alert bit of the latched error, and the model of --model.
+    assert_eq!(status, (0x80, vec![0x24, 0x04, 45]));
+}
+
+/// The stdin commands of `conductor-sim slcan`: faults per node, and the adapter's odd
+/// behaviours (no acks, latency, stall, raw bytes to the host).
+#[test]
+fn slcan_process_commands() {
+    use std::io::Read;
+
+    // No cyclic heartbeat: the host reads exact byte streams below.
+    let mut sim = Sim::spawn(&[
+        "slcan",
+        "--mit",
+        "1",
+        "--odrive",
+        "4",
+        "--long-reply",
+        "--heartbeat-ms",
+        "0",
+    ]);
+    assert_eq!(sim.cmd("fault 1 5"), "ok");
+    assert_eq!(sim.cmd("fault 4 0x800"), "ok");
+    let s = sim.stats();
+    assert!(
+        s.contains("\"id\": 1, ") && s.contains("\"fault\": 5,"),
+        "{s}"
+    );
+    assert!(s.contains("\"fault\": 2048,"), "{s}");
+    assert_eq!(sim.cmd("clear 1"), "ok");
+    assert!(sim.cmd("fault 7 1").starts_with("error no node 7"));
+    assert!(
+        sim.cmd("fault 1 256").starts_with("error node 1"),
+        "not an MIT code"
+    );
+    assert!(sim.cmd("acks maybe").starts_with("error usage"));
+    assert!(sim.cmd("inject 7G").starts_with("error"));
+    let mut port = serialport::new(sim.link.to_str().unwrap(), 1_000_000)
+        .timeout(Duration::from_secs(2))
+        .open_native()
+        .unwrap();
+    // Reads until `n` CR- or BEL-terminated lines have arrived.
+    let read_until = |port: &mut serialport::TTYPort, n: usize| {
+        let mut got = Vec::new();
+        let mut buf = [0u8; 256];
+        while got.iter().filter(|&&b| b == b'\r' || b == 7).count() < n {
+            let k = port.read(&mut buf).unwrap();
+            got.extend_from_slice(&buf[..k]);
+        }
+        String::from_utf8(got).unwrap()
+    };
+    assert_eq!(sim.cmd("inject 74 30 30 30 30 0D"), "ok");
+    assert_eq!(read_until(&mut port, 1), "t0000\r");
+    assert_eq!(sim.cmd("acks off"), "ok");
+    assert_eq!(sim.cmd("latency 1000"), "ok");
+    assert_eq!(sim.cmd("stall 20"), "ok");
+    port.write_all(b"O\rt0018FFFFFFFFFFFFFFFC\r").unwrap();
+    // Open's CR, then no ack for the frame: the motor's 8-byte reply alone (no fault any
+    // more, 40 °C).
+    assert_eq!(read_until(&mut port, 2), "\rt0008017FFF7FF7FF2800\r");
+    let s = sim.stats();
+    assert_eq!(field(&s, "frames_from_host"), "1");
 }

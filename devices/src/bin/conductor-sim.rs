@@ -6,9 +6,22 @@
 //! conductor-sim slcan --pty-link /tmp/can0 --mit 1,2,3 --odrive 4
 //! ```
 //!
-//! The first line on stdout is `ready <device> [link <path>]`. Then each line `stats` on stdin
-//! is answered with one JSON line of counters (and, for `dxl`, every servo's present and goal
-//! position); `quit` or end of input stops the simulator.
+//! The first line on stdout is `ready <device> [link <path>]`. Then each line on stdin is a
+//! command:
+//!
+//! * `stats`: one JSON line of counters and state (for `dxl`, every servo's present and goal
+//!   position, torque and hardware error; for `slcan`, every node's position, fault and
+//!   ignored commands);
+//! * `unplug`, `replug`: the USB adapter leaves and comes back at the same path (`--pty-link`
+//!   needed for `replug`), the servos or motors keeping their state;
+//! * `fault <id> <code>`: `dxl`: latch hardware error bits in servo `id`; `slcan`: MIT fault
+//!   code or ODrive axis error bits for node `id`;
+//! * `clear <id>` (`slcan`): clear node `id`'s fault;
+//! * `stall <ms>`, `acks on|off`, `latency <us>`, `inject <hex bytes>` (`slcan`): the adapter
+//!   stalls, stops acknowledging transmitted frames, lags, or sends raw bytes to the host;
+//! * `quit` (or end of input) stops the simulator.
+//!
+//! Every command but `stats` is answered with one line, `ok` or `error <why>`.
 
 use std::io::{BufRead, Write};
 use std::net::SocketAddr;
@@ -92,6 +105,12 @@ enum Cmd {
         /// Time constant of the position response (s).
         #[arg(long, default_value_t = 0.05)]
         tau: f64,
+        /// Power up with torque on (legacy; a real servo powers up with torque off).
+        #[arg(long)]
+        torque_on: bool,
+        /// Model number every servo reports (1020 = XM430-W350).
+        #[arg(long, default_value_t = 1020)]
+        model: u16,
         #[command(flatten)]
         faults: Faults,
     },
@@ -154,7 +173,8 @@ fn dxl_stats(sim: &DxlBusSim) -> String {
         "{{\"bytes_in\": {}, \"packets_in\": {}, \"discarded_in\": {}, \"rejected_in\": {}, \
          \"ping\": {}, \"read\": {}, \"write\": {}, \"sync_read\": {}, \"fast_sync_read\": {}, \
          \"sync_write\": {}, \"sync_write_bytes\": {}, \"bulk_read\": {}, \"bulk_write\": {}, \
-         \"packets_out\": {}, \"bytes_out\": {}, \"ids\": [{}], \"present\": [{}], \"goal\": [{}]}}",
+         \"reboot\": {}, \"packets_out\": {}, \"bytes_out\": {}, \"ids\": [{}], \"present\": [{}], \
+         \"goal\": [{}], \"torque\": [{}], \"hardware_error\": [{}]}}",
         s.bytes_in,
         s.packets_in,
         s.discarded_in,
@@ -168,11 +188,17 @@ fn dxl_stats(sim: &DxlBusSim) -> String {
         s.sync_write_bytes,
         s.bulk_read,
         s.bulk_write,
+        s.reboot,
         s.packets_out,
         s.bytes_out,
-        ids.iter().map(|i| i.to_string()).collect::<Vec<_>>().join(","),
+        ids.iter()
+            .map(|i| i.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
         list(&|id| sim.servo(id).map_or(0, |s| s.present_position())),
         list(&|id| sim.servo(id).map_or(0, |s| s.goal_position())),
+        list(&|id| sim.servo(id).map_or(0, |s| s.torque_on() as i32)),
+        list(&|id| sim.servo(id).map_or(0, |s| s.hardware_error() as i32)),
     )
 }
 
@@ -184,8 +210,9 @@ fn slcan_stats(a: &SlcanAdapterSim) -> String {
         .map(|n| {
             let s = n.snapshot();
             format!(
-                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}}}",
-                s.id, s.position, s.enabled, s.frames_in
+                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}, \
+                 \"fault\": {}, \"ignored\": {}}}",
+                s.id, s.position, s.enabled, s.frames_in, s.fault, s.ignored
             )
         })
         .collect::<Vec<_>>()
@@ -204,30 +231,147 @@ fn slcan_stats(a: &SlcanAdapterSim) -> String {
     )
 }
 
-/// Serves `stats` requests on stdin until `quit` or end of input.
-fn serve<S: Send + 'static>(running: Running<S>, stats_ms: u64, line: fn(&S) -> String) {
+/// A simulator-specific command: its name and arguments → `Ok` or why not.
+type Control<S> = fn(&Running<S>, &str, &[&str]) -> Result<(), String>;
+
+/// A number, decimal or `0x` hex.
+fn number<T: TryFrom<u64>>(s: &str) -> Result<T, String> {
+    let v = match s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        Some(h) => u64::from_str_radix(h, 16),
+        None => s.parse(),
+    }
+    .map_err(|_| format!("not a number: {s:?}"))?;
+    T::try_from(v).map_err(|_| format!("out of range: {s}"))
+}
+
+fn args<const N: usize>(a: &[&str], usage: &str) -> Result<[String; N], String> {
+    if a.len() != N {
+        return Err(format!("usage: {usage}"));
+    }
+    Ok(std::array::from_fn(|i| a[i].to_string()))
+}
+
+fn dxl_control(r: &Running<DxlBusSim>, cmd: &str, a: &[&str]) -> Result<(), String> {
+    match cmd {
+        "fault" => {
+            let [id, bits] = args(a, "fault <id> <hardware error bits>")?;
+            let (id, bits): (u8, u8) = (number(&id)?, number(&bits)?);
+            let mut sim = r.sim();
+            let s = sim.servo_mut(id).ok_or(format!("no servo {id}"))?;
+            s.inject_hardware_error(bits);
+            Ok(())
+        }
+        other => Err(format!("not a dxl command: {other}")),
+    }
+}
+
+fn slcan_control(r: &Running<SlcanAdapterSim>, cmd: &str, a: &[&str]) -> Result<(), String> {
+    let node = |sim: &mut SlcanAdapterSim, id: u8, f: &dyn Fn(&mut dyn CanNode) -> bool| {
+        let n = sim
+            .nodes_mut()
+            .iter_mut()
+            .find(|n| n.snapshot().id == id)
+            .ok_or(format!("no node {id}"))?;
+        if f(n.as_mut()) {
+            Ok(())
+        } else {
+            Err(format!("node {id} does not take that fault"))
+        }
+    };
+    match cmd {
+        "fault" => {
+            let [id, code] = args(a, "fault <id> <code>")?;
+            let (id, code): (u8, u32) = (number(&id)?, number(&code)?);
+            node(&mut r.sim(), id, &|n| n.set_fault(code))
+        }
+        "clear" => {
+            let [id] = args(a, "clear <id>")?;
+            node(&mut r.sim(), number(&id)?, &|n| n.reset_fault())
+        }
+        "stall" => {
+            let [ms] = args(a, "stall <ms>")?;
+            let ms: u64 = number(&ms)?;
+            let until = r.now_ns() + ms * 1_000_000;
+            r.sim().stall_until(until);
+            Ok(())
+        }
+        "acks" => {
+            let on = match a {
+                ["on"] => true,
+                ["off"] => false,
+                _ => return Err("usage: acks on|off".into()),
+            };
+            r.sim().set_acks(on);
+            Ok(())
+        }
+        "latency" => {
+            let [us] = args(a, "latency <us>")?;
+            let us: u64 = number(&us)?;
+            r.sim().set_latency(us * 1000);
+            Ok(())
+        }
+        "inject" => {
+            let hex: String = a.concat();
+            if hex.is_empty() || !hex.is_ascii() || !hex.len().is_multiple_of(2) {
+                return Err("usage: inject <hex bytes>".into());
+            }
+            let bytes = (0..hex.len())
+                .step_by(2)
+                .map(|i| u8::from_str_radix(&hex[i..i + 2], 16))
+                .collect::<Result<Vec<u8>, _>>()
+                .map_err(|_| format!("not hex: {hex}"))?;
+            r.sim().inject_to_host(&bytes);
+            Ok(())
+        }
+        other => Err(format!("not an slcan command: {other}")),
+    }
+}
+
+fn say(text: &str) {
+    let mut out = std::io::stdout().lock();
+    let _ = writeln!(out, "{text}");
+    let _ = out.flush();
+}
+
+/// Serves the commands on stdin until `quit` or end of input.
+fn serve<S: Send + 'static>(
+    running: Running<S>,
+    stats_ms: u64,
+    line: fn(&S) -> String,
+    control: Control<S>,
+) {
     let running = std::sync::Arc::new(running);
     if stats_ms > 0 {
         let r = running.clone();
         std::thread::spawn(move || loop {
             std::thread::sleep(std::time::Duration::from_millis(stats_ms));
             let text = line(&r.sim());
-            let mut out = std::io::stdout().lock();
-            let _ = writeln!(out, "{text}");
-            let _ = out.flush();
+            say(&text);
         });
     }
     for l in std::io::stdin().lock().lines() {
         let Ok(l) = l else { break };
-        match l.trim() {
+        let words: Vec<&str> = l.split_whitespace().collect();
+        let Some((&cmd, rest)) = words.split_first() else {
+            continue;
+        };
+        let result = match cmd {
             "stats" => {
                 let text = line(&running.sim());
-                let mut out = std::io::stdout().lock();
-                let _ = writeln!(out, "{text}");
-                let _ = out.flush();
+                say(&text);
+                continue;
             }
             "quit" => break,
-            _ => {}
+            "unplug" => {
+                running.unplug();
+                Ok(())
+            }
+            "replug" => running.replug().map_err(|e| e.to_string()),
+            _ => control(&running, cmd, rest),
+        };
+        match result {
+            Ok(()) => say("ok"),
+            Err(why) => say(&format!("error {why}")),
         }
     }
 }
@@ -243,6 +387,8 @@ fn main() {
             return_delay_us,
             no_baud_timing,
             tau,
+            torque_on,
+            model,
             faults: f,
         } => endpoint(&at).map(|(ep, desc)| {
             let cfg = DxlSimConfig {
@@ -255,6 +401,8 @@ fn main() {
                 return_delay_us,
                 baud_timing: !no_baud_timing,
                 tau_s: tau,
+                torque_on,
+                model,
                 ..DxlSimConfig::default()
             };
             let faults = FaultConfig {
@@ -272,7 +420,7 @@ fn main() {
             let running = run_dxl(ep, cfg, faults, up);
             println!("ready {desc}");
             let _ = std::io::stdout().flush();
-            serve(running, at.stats_ms, dxl_stats);
+            serve(running, at.stats_ms, dxl_stats, dxl_control);
         }),
         Cmd::Slcan {
             at,
@@ -307,7 +455,7 @@ fn main() {
                 let running = run_slcan(ep, SlcanAdapterSim::new(dialect, nodes));
                 println!("ready {desc}");
                 let _ = std::io::stdout().flush();
-                serve(running, at.stats_ms, slcan_stats);
+                serve(running, at.stats_ms, slcan_stats, slcan_control);
             })
         }
     };

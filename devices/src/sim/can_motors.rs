@@ -1,6 +1,18 @@
 //! CAN motors that answer real frames: an MIT-mode motor (Katz firmware behaviour: one reply per
 //! received frame, sent before the command is applied) and an ODrive axis (CAN Simple 0.6:
 //! remote-frame requests, setpoints, cyclic heartbeat and encoder estimates).
+//!
+//! Both are as strict as their firmware, never kinder:
+//!
+//! * [`MitMotorSim`] ignores commands until the Enter frame (counted, [`MitMotorSim::ignored`]);
+//!   Enter starts with a zero command (no torque until the next command), Exit makes it limp.
+//!   A fault ([`MitMotorSim::inject_fault`]) makes it limp and refuses Enter until cleared;
+//!   the fault code shows only in the 8-byte replies of newer CubeMars firmware
+//!   (`long_reply = true`, `data[7]`; the 6-byte Katz reply has no room for it).
+//! * [`OdriveAxisSim`] starts IDLE; an axis error ([`OdriveAxisSim::inject_error`]) puts it in
+//!   IDLE, shows in the heartbeat and Get_Error, and refuses every state but IDLE until
+//!   Clear_Errors. Inputs written while IDLE are kept: entering closed loop goes to the stored
+//!   input position (a stale input makes it jump).
 
 use conductor_protocols::can::CanFrame;
 use conductor_protocols::mit_can::{self, Limits, MotorCommand, SpecialCommand};
@@ -18,6 +30,11 @@ pub struct NodeSnapshot {
     pub enabled: bool,
     /// Frames received addressed to it.
     pub frames_in: u64,
+    /// Active fault: the MIT fault code (1–10) or the ODrive axis error bits; 0 = none.
+    pub fault: u32,
+    /// Commands ignored (MIT: control frames outside motor mode; ODrive: state requests
+    /// refused while an axis error is active).
+    pub ignored: u64,
 }
 
 /// A node on a simulated CAN bus.
@@ -28,6 +45,16 @@ pub trait CanNode: Send {
     fn poll(&mut self, _now_ns: u64, _out: &mut Vec<CanFrame>) {}
     /// Its state.
     fn snapshot(&self) -> NodeSnapshot;
+    /// Injects fault `code` (MIT fault code, ODrive axis error bits); false if the node has no
+    /// such faults or the code does not fit.
+    fn set_fault(&mut self, _code: u32) -> bool {
+        false
+    }
+    /// Clears an injected fault (for an ODrive the host's Clear_Errors does too); false if the
+    /// node has no faults.
+    fn reset_fault(&mut self) -> bool {
+        false
+    }
 }
 
 /// Rigid-body joint: `J·dv/dt = τ − b·v`, integrated in steps of at most 0.25 ms.
@@ -71,13 +98,16 @@ pub struct MitMotorSim {
     joint: Joint,
     zero: f64,
     long_reply: bool,
+    fault: u8,
+    temperature: u8,
+    ignored: u64,
     /// Frames received addressed to this motor.
     pub frames_in: u64,
 }
 
 impl MitMotorSim {
     /// Motor `id` with `limits`, replying to `master`; `long_reply` sends the 8-byte reply
-    /// (temperature and fault code) of newer CubeMars firmware.
+    /// (temperature and fault code) of newer CubeMars firmware. Faults show only in those.
     pub fn new(id: u8, limits: Limits, master: u16, long_reply: bool) -> Self {
         Self {
             id,
@@ -93,8 +123,45 @@ impl MitMotorSim {
             },
             zero: 0.0,
             long_reply,
+            fault: 0,
+            temperature: 40,
+            ignored: 0,
             frames_in: 0,
         }
+    }
+
+    /// Control commands ignored because motor mode was off (before Enter, after Exit, while
+    /// faulted).
+    pub fn ignored(&self) -> u64 {
+        self.ignored
+    }
+
+    /// Latches fault `code` (CubeMars codes 1–10: over-voltage, under-voltage, DRV fault, abs
+    /// over-current, FET over-temperature, motor over-temperature, gate-driver over-/under-
+    /// voltage, MCU under-voltage, watchdog reset): the motor leaves motor mode (limp, command
+    /// reset), refuses Enter until [`clear_fault`](Self::clear_fault), and its 8-byte replies
+    /// carry `code` in `data[7]` (the 6-byte reply cannot show it). Code 0 clears.
+    pub fn inject_fault(&mut self, code: u8) {
+        self.fault = code;
+        if code != 0 {
+            self.enabled = false;
+            self.cmd = mit_can::Command::default();
+        }
+    }
+
+    /// Clears the fault; the motor stays limp until the next Enter.
+    pub fn clear_fault(&mut self) {
+        self.fault = 0;
+    }
+
+    /// The latched fault code (0 = none).
+    pub fn fault(&self) -> u8 {
+        self.fault
+    }
+
+    /// Sets the temperature reported in `data[6]` of the 8-byte reply (°C as sent).
+    pub fn set_temperature(&mut self, c: u8) {
+        self.temperature = c;
     }
 
     /// Whether motor mode is on.
@@ -144,21 +211,27 @@ impl CanNode for MitMotorSim {
             v: self.joint.v as f32,
             t: self.joint.tau as f32,
             extra: self.long_reply.then_some(mit_can::ReplyExtra {
-                temperature: 40,
-                fault: None,
+                temperature: self.temperature,
+                fault: mit_can::Fault::from_code(self.fault),
             }),
         };
         if let Ok(r) = mit_can::reply_frame(self.master, &reply, &self.limits) {
             out.push(r);
         }
         match mit_can::decode_command(f.data(), &self.limits) {
-            Ok(MotorCommand::Special(SpecialCommand::Enter)) => self.enabled = true,
+            // Motor mode starts from a zero command: no torque until the next command. A
+            // faulted motor stays limp.
+            Ok(MotorCommand::Special(SpecialCommand::Enter)) => {
+                self.cmd = mit_can::Command::default();
+                self.enabled = self.fault == 0;
+            }
             Ok(MotorCommand::Special(SpecialCommand::Exit)) => {
                 self.enabled = false;
                 self.cmd = mit_can::Command::default();
             }
             Ok(MotorCommand::Special(SpecialCommand::Zero)) => self.zero = self.joint.p,
             Ok(MotorCommand::Control(c)) if self.enabled => self.cmd = c,
+            Ok(MotorCommand::Control(_)) => self.ignored += 1,
             _ => {}
         }
     }
@@ -169,7 +242,24 @@ impl CanNode for MitMotorSim {
             position: self.position(),
             enabled: self.enabled,
             frames_in: self.frames_in,
+            fault: self.fault as u32,
+            ignored: self.ignored,
         }
+    }
+
+    fn set_fault(&mut self, code: u32) -> bool {
+        match u8::try_from(code) {
+            Ok(c) => {
+                self.inject_fault(c);
+                true
+            }
+            Err(_) => false,
+        }
+    }
+
+    fn reset_fault(&mut self) -> bool {
+        self.clear_fault();
+        true
     }
 }
 
@@ -188,6 +278,8 @@ pub struct OdriveAxisSim {
     encoder_ns: u64,
     next_heartbeat: u64,
     next_encoder: u64,
+    axis_error: u32,
+    ignored: u64,
     /// Frames received addressed to this axis.
     pub frames_in: u64,
 }
@@ -208,6 +300,8 @@ impl OdriveAxisSim {
             encoder_ns: encoder_ms * 1_000_000,
             next_heartbeat: 0,
             next_encoder: 0,
+            axis_error: 0,
+            ignored: 0,
             frames_in: 0,
         }
     }
@@ -215,6 +309,36 @@ impl OdriveAxisSim {
     /// Axis state (8 = closed loop).
     pub fn state(&self) -> u32 {
         self.state
+    }
+
+    /// Sets `axis_error` bits: the axis disarms (IDLE), the heartbeat and Get_Error report
+    /// them, and every requested state but IDLE is refused until Clear_Errors (or
+    /// [`clear_error`](Self::clear_error)). 0 changes nothing.
+    pub fn inject_error(&mut self, axis_error: u32) {
+        if axis_error != 0 {
+            self.axis_error |= axis_error;
+            self.state = axis_state::IDLE;
+        }
+    }
+
+    /// Clears the axis error, as Clear_Errors does; the axis stays IDLE.
+    pub fn clear_error(&mut self) {
+        self.axis_error = 0;
+    }
+
+    /// The active axis error bits (0 = none).
+    pub fn axis_error(&self) -> u32 {
+        self.axis_error
+    }
+
+    /// Set_Axis_State requests refused because of an active error.
+    pub fn ignored(&self) -> u64 {
+        self.ignored
+    }
+
+    /// The stored inputs: position (rev), velocity (rev/s), torque (Nm).
+    pub fn input(&self) -> (f32, f32, f32) {
+        self.input
     }
 
     /// Position (rev).
@@ -247,7 +371,7 @@ impl OdriveAxisSim {
     fn answer(&self, cmd: CmdId) -> Option<Message> {
         Some(match cmd {
             CmdId::Heartbeat => Message::Heartbeat {
-                axis_error: 0,
+                axis_error: self.axis_error,
                 axis_state: self.state as u8,
                 procedure_result: 0,
                 trajectory_done: true,
@@ -273,8 +397,8 @@ impl OdriveAxisSim {
                 motor: 30.0,
             },
             CmdId::GetError => Message::GetError {
-                active_errors: 0,
-                disarm_reason: 0,
+                active_errors: self.axis_error,
+                disarm_reason: self.axis_error,
             },
             _ => return None,
         })
@@ -302,7 +426,15 @@ impl CanNode for OdriveAxisSim {
             return;
         }
         match Message::decode(cmd, f.data()) {
+            // An axis with an active error only goes (stays) IDLE. Entering closed loop keeps
+            // the stored input position.
+            Ok(Message::SetAxisState { requested_state })
+                if self.axis_error != 0 && requested_state != axis_state::IDLE =>
+            {
+                self.ignored += 1;
+            }
             Ok(Message::SetAxisState { requested_state }) => self.state = requested_state,
+            Ok(Message::ClearErrors { .. }) => self.axis_error = 0,
             Ok(Message::Estop) => self.state = axis_state::IDLE,
             Ok(Message::SetControllerMode { control_mode, .. }) => self.control_mode = control_mode,
             Ok(Message::SetInputPos {
@@ -346,6 +478,18 @@ impl CanNode for OdriveAxisSim {
             position: self.pos * std::f64::consts::TAU,
             enabled: self.state == axis_state::CLOSED_LOOP_CONTROL,
             frames_in: self.frames_in,
+            fault: self.axis_error,
+            ignored: self.ignored,
         }
+    }
+
+    fn set_fault(&mut self, code: u32) -> bool {
+        self.inject_error(code);
+        true
+    }
+
+    fn reset_fault(&mut self) -> bool {
+        self.clear_error();
+        true
     }
 }

@@ -80,6 +80,12 @@ impl DxlSimHardware {
         &self.sim
     }
 
+    /// The simulator, to change it behind the host's back (e.g.
+    /// `sim_mut().servo_mut(id)` to inject a hardware error or move a limp shaft).
+    pub fn sim_mut(&mut self) -> &mut DxlBusSim {
+        &mut self.sim
+    }
+
     /// The simulator's counters.
     pub fn stats(&self) -> DxlSimStats {
         self.sim.stats()
@@ -196,6 +202,11 @@ impl CanSimHardware {
         }
     }
 
+    /// The nodes, to inject faults behind the host's back ([`CanNode::set_fault`]).
+    pub fn nodes_mut(&mut self) -> &mut [Box<dyn CanNode>] {
+        &mut self.nodes
+    }
+
     /// The nodes' states.
     pub fn snapshots(&self) -> Vec<NodeSnapshot> {
         self.nodes.iter().map(|n| n.snapshot()).collect()
@@ -248,7 +259,9 @@ impl Hardware for CanSimHardware {
 }
 
 /// The SLCAN adapter simulator as byte hardware (the serial side of a USB-CAN adapter), for
-/// running [`crate::hw::SlcanHardware`] in process. Answers are available at once.
+/// running [`crate::hw::SlcanHardware`] in process. Answers are available at once, or after
+/// the adapter's latency or stall ([`SlcanAdapterSim::set_latency`],
+/// [`SlcanAdapterSim::stall_until`]).
 #[derive(Debug)]
 pub struct SlcanSimPort {
     adapter: SlcanAdapterSim,
@@ -271,6 +284,11 @@ impl SlcanSimPort {
     /// The adapter.
     pub fn adapter(&self) -> &SlcanAdapterSim {
         &self.adapter
+    }
+
+    /// The adapter, to make it lag, stall or drop acks, or to reach its nodes.
+    pub fn adapter_mut(&mut self) -> &mut SlcanAdapterSim {
+        &mut self.adapter
     }
 
     /// The adapter's counters.

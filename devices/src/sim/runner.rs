@@ -3,14 +3,19 @@
 //! or a UDP socket. `conductor-sim` runs these as a standalone process.
 //!
 //! Replies are written when their time comes (the simulator's return delay and baud-accurate
-//! wire time), measured on `CLOCK_MONOTONIC` from the moment the instruction was read.
+//! wire time, the SLCAN adapter's latency and stalls), measured on `CLOCK_MONOTONIC` from the
+//! moment the instruction was read.
+//!
+//! A running simulator can be unplugged and plugged back ([`Running::unplug`],
+//! [`Running::replug`]): the USB adapter leaves and comes back at the same path while the
+//! servos or motors behind it stay powered and keep their state.
 
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
 use std::os::unix::io::{AsRawFd, RawFd};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -19,7 +24,6 @@ use serialport::{SerialPort, TTYPort};
 use super::dxl::{DxlBusSim, DxlSimConfig};
 use super::fault::{FaultConfig, FaultInjector, FaultTotals};
 use super::slcan_adapter::SlcanAdapterSim;
-use crate::hw::fd;
 
 /// A pseudo-terminal whose slave side the host opens.
 pub struct Pty {
@@ -47,7 +51,7 @@ impl Pty {
         let path = slave
             .name()
             .ok_or_else(|| io::Error::other("pty without a name"))?;
-        fd::set_nonblocking(master.as_raw_fd())?;
+        set_nonblocking(master.as_raw_fd())?;
         if let Some(l) = link {
             match std::fs::remove_file(l) {
                 Ok(()) => {}
@@ -116,27 +120,135 @@ impl Endpoint {
     }
 }
 
+/// Sets `O_NONBLOCK` on `fd`.
+fn set_nonblocking(fd: RawFd) -> io::Result<()> {
+    // SAFETY: fcntl with F_GETFL/F_SETFL only reads and writes the descriptor's flags; an
+    // invalid fd yields EBADF, which we report.
+    let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
+    if flags < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    // SAFETY: as above.
+    if unsafe { libc::fcntl(fd, libc::F_SETFL, flags | libc::O_NONBLOCK) } < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+/// `read(2)` on a non-blocking fd: 0 when nothing is there.
+fn read_nb(fd: RawFd, buf: &mut [u8]) -> io::Result<usize> {
+    // SAFETY: buf is valid for buf.len() bytes of writes.
+    let n = unsafe { libc::read(fd, buf.as_mut_ptr().cast(), buf.len()) };
+    if n >= 0 {
+        return Ok(n as usize);
+    }
+    let e = io::Error::last_os_error();
+    match e.kind() {
+        io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted => Ok(0),
+        _ => Err(e),
+    }
+}
+
+/// `write(2)` on a non-blocking fd: 0 when it would block.
+fn write_nb(fd: RawFd, data: &[u8]) -> io::Result<usize> {
+    // SAFETY: data is valid for data.len() bytes of reads.
+    let n = unsafe { libc::write(fd, data.as_ptr().cast(), data.len()) };
+    if n >= 0 {
+        return Ok(n as usize);
+    }
+    let e = io::Error::last_os_error();
+    match e.kind() {
+        io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted => Ok(0),
+        _ => Err(e),
+    }
+}
+
+/// What the handle asks the serving thread to do with its endpoint.
+enum PlugRequest {
+    Unplug,
+    Replug(Endpoint),
+}
+
+/// The endpoint's plug state, shared by the handle and the serving thread.
+#[derive(Default)]
+struct PlugState {
+    plugged: bool,
+    request: Option<PlugRequest>,
+}
+
+#[derive(Default)]
+struct Plug {
+    state: Mutex<PlugState>,
+    changed: Condvar,
+}
+
+/// What happened to the endpoint during [`Io::service`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PlugEvent {
+    Unplugged,
+    Replugged,
+}
+
 struct Io {
-    ep: Endpoint,
+    ep: Option<Endpoint>,
     peer: Option<SocketAddr>,
+    plug: Arc<Plug>,
+    t0: Instant,
 }
 
 impl Io {
-    /// Waits up to `timeout` for input; returns what arrived.
+    /// Nanoseconds since the simulator started (the clock of its `now_ns`).
+    fn now(&self) -> u64 {
+        self.t0.elapsed().as_nanos() as u64
+    }
+
+    /// Carries out a pending unplug or replug request.
+    fn service(&mut self) -> Option<PlugEvent> {
+        let mut st = lock(&self.plug.state);
+        let ev = match st.request.take()? {
+            PlugRequest::Unplug => {
+                // Dropping a Pty closes the master and our slave handle (the host's open
+                // slave sees the hang-up) and removes the symlink.
+                self.ep = None;
+                self.peer = None;
+                st.plugged = false;
+                PlugEvent::Unplugged
+            }
+            PlugRequest::Replug(ep) => {
+                self.ep = Some(ep);
+                st.plugged = true;
+                PlugEvent::Replugged
+            }
+        };
+        drop(st);
+        self.plug.changed.notify_all();
+        Some(ev)
+    }
+
+    /// Waits up to `timeout` (at most 50 ms) for input; returns what arrived.
     fn read(&mut self, buf: &mut [u8], timeout: Duration) -> usize {
+        let timeout = timeout.min(Duration::from_millis(50));
+        let Some(ep) = &self.ep else {
+            // Unplugged: nothing arrives; wake up often enough to see a replug.
+            std::thread::sleep(timeout.min(Duration::from_millis(1)));
+            return 0;
+        };
         let mut pfd = libc::pollfd {
-            fd: self.ep.raw_fd(),
+            fd: ep.raw_fd(),
             events: libc::POLLIN,
             revents: 0,
         };
-        let ms = timeout.as_millis().min(50) as libc::c_int;
-        // SAFETY: one valid pollfd.
-        let r = unsafe { libc::poll(&mut pfd, 1, ms) };
+        let ts = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: timeout.as_nanos() as libc::c_long,
+        };
+        // SAFETY: one valid pollfd, a valid timespec, no signal mask.
+        let r = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
         if r <= 0 {
             return 0;
         }
-        match &self.ep {
-            Endpoint::Pty(p) => fd::read_nb(p.master.as_raw_fd(), buf).unwrap_or(0),
+        match ep {
+            Endpoint::Pty(p) => read_nb(p.master.as_raw_fd(), buf).unwrap_or(0),
             Endpoint::Udp(s) => match s.recv_from(buf) {
                 Ok((n, from)) => {
                     self.peer = Some(from);
@@ -149,18 +261,19 @@ impl Io {
 
     fn write(&mut self, data: &[u8]) {
         match &self.ep {
-            Endpoint::Pty(p) => {
+            None => {}
+            Some(Endpoint::Pty(p)) => {
                 let mut rest = data;
                 let deadline = Instant::now() + Duration::from_secs(1);
                 while !rest.is_empty() && Instant::now() < deadline {
-                    match fd::write_nb(p.master.as_raw_fd(), rest) {
+                    match write_nb(p.master.as_raw_fd(), rest) {
                         Ok(0) => std::thread::sleep(Duration::from_micros(100)),
                         Ok(n) => rest = &rest[n..],
                         Err(_) => return,
                     }
                 }
             }
-            Endpoint::Udp(s) => {
+            Some(Endpoint::Udp(s)) => {
                 if let Some(peer) = self.peer {
                     let _ = s.send_to(data, peer);
                 }
@@ -173,6 +286,17 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// How a simulator's endpoint is made again after an unplug.
+#[derive(Debug, Clone)]
+enum Replug {
+    /// A new pty with its symlink at this path.
+    Pty(PathBuf),
+    /// The UDP socket bound again to this address.
+    Udp(SocketAddr),
+    /// A pty without a link: the host could not find a new one.
+    Never,
+}
+
 /// A simulator running in its own thread.
 pub struct Running<S> {
     sim: Arc<Mutex<S>>,
@@ -180,10 +304,17 @@ pub struct Running<S> {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     endpoint: String,
+    plug: Arc<Plug>,
+    replug: Replug,
+    t0: Instant,
 }
 
 /// Fault totals of a simulator thread: (host → simulator, simulator → host).
 type Faults = Mutex<(FaultTotals, FaultTotals)>;
+
+/// How long the handle waits for the serving thread to carry out an unplug or replug (it looks
+/// at least every 50 ms).
+const PLUG_WAIT: Duration = Duration::from_secs(5);
 
 impl<S: Send + 'static> Running<S> {
     /// Runs `serve` in a thread named `name`, on `ep`, with the simulator and the fault totals
@@ -195,13 +326,26 @@ impl<S: Send + 'static> Running<S> {
         serve: impl FnOnce(Io, &Mutex<S>, &Faults, &AtomicBool) + Send + 'static,
     ) -> Self {
         let endpoint = ep.describe();
+        let replug = match &ep {
+            Endpoint::Pty(p) => p.link().map_or(Replug::Never, |l| Replug::Pty(l.into())),
+            Endpoint::Udp(s) => s.local_addr().map_or(Replug::Never, Replug::Udp),
+        };
         let sim = Arc::new(Mutex::new(sim));
         let faults = Arc::new(Faults::default());
         let stop = Arc::new(AtomicBool::new(false));
+        let plug = Arc::new(Plug::default());
+        lock(&plug.state).plugged = true;
+        let t0 = Instant::now();
+        let io = Io {
+            ep: Some(ep),
+            peer: None,
+            plug: plug.clone(),
+            t0,
+        };
         let (s2, f2, st2) = (sim.clone(), faults.clone(), stop.clone());
         let thread = std::thread::Builder::new()
             .name(name.into())
-            .spawn(move || serve(Io { ep, peer: None }, &s2, &f2, &st2))
+            .spawn(move || serve(io, &s2, &f2, &st2))
             .expect("spawn simulator thread");
         Running {
             sim,
@@ -209,6 +353,9 @@ impl<S: Send + 'static> Running<S> {
             stop,
             thread: Some(thread),
             endpoint,
+            plug,
+            replug,
+            t0,
         }
     }
 }
@@ -224,9 +371,95 @@ impl<S> Running<S> {
         *lock(&self.faults)
     }
 
-    /// Where the host connects.
+    /// Where the host connects: the pty device it was started on, or the UDP address. After
+    /// a [`replug`](Self::replug) the pty device differs; the [`link`](Self::link) does not.
     pub fn endpoint(&self) -> &str {
         &self.endpoint
+    }
+
+    /// The pty's symlink, if it was made with one.
+    pub fn link(&self) -> Option<&Path> {
+        match &self.replug {
+            Replug::Pty(l) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// The simulator's clock: nanoseconds since it started, the `now_ns` it is driven with
+    /// (for [`SlcanAdapterSim::stall_until`] and the like).
+    pub fn now_ns(&self) -> u64 {
+        self.t0.elapsed().as_nanos() as u64
+    }
+
+    /// Whether the endpoint is plugged in.
+    pub fn is_plugged(&self) -> bool {
+        lock(&self.plug.state).plugged
+    }
+
+    /// Unplugs the endpoint, as a USB adapter pulled out while the servos or motors behind it
+    /// stay powered: the pty (master and the slave handle kept open) is closed, so the host's
+    /// open descriptor sees the hang-up, and the symlink is removed (a UDP socket is closed).
+    /// Bytes in flight are lost; the simulator keeps its state and its motors keep moving.
+    /// An SLCAN adapter loses its own state ([`SlcanAdapterSim::unplug`]). Does nothing if
+    /// already unplugged.
+    pub fn unplug(&self) {
+        self.request(|plugged| plugged.then_some(PlugRequest::Unplug));
+    }
+
+    /// Plugs the simulator back in: a new pty with the symlink at the same path (or the UDP
+    /// socket bound to the same address), served with the same simulator state. An error if
+    /// it is plugged in, or was started on a pty without a link (the host could not find the
+    /// new one), or the pty cannot be made.
+    pub fn replug(&self) -> io::Result<()> {
+        if self.is_plugged() {
+            return Err(io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                "the simulator is plugged in",
+            ));
+        }
+        let ep = match &self.replug {
+            Replug::Pty(l) => Endpoint::Pty(Pty::open(Some(l))?),
+            Replug::Udp(a) => Endpoint::udp(*a)?,
+            Replug::Never => {
+                return Err(io::Error::new(
+                    io::ErrorKind::Unsupported,
+                    "replug needs a pty made with a link path (or a UDP endpoint)",
+                ))
+            }
+        };
+        if self.request(|_| Some(PlugRequest::Replug(ep))) {
+            Ok(())
+        } else {
+            Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "the simulator thread did not take the new endpoint",
+            ))
+        }
+    }
+
+    /// Hands the serving thread the request `make` builds from the plug state (`None`: nothing
+    /// to do) and waits until it is carried out; false if the thread did not do it in time.
+    fn request(&self, make: impl FnOnce(bool) -> Option<PlugRequest>) -> bool {
+        let mut st = lock(&self.plug.state);
+        let Some(req) = make(st.plugged) else {
+            return true;
+        };
+        st.request = Some(req);
+        let deadline = Instant::now() + PLUG_WAIT;
+        while st.request.is_some() {
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() || self.thread.as_ref().is_none_or(|t| t.is_finished()) {
+                st.request = None;
+                return false;
+            }
+            st = self
+                .plug
+                .changed
+                .wait_timeout(st, left)
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+        true
     }
 
     /// Stops the thread.
@@ -249,7 +482,8 @@ impl<S> Drop for Running<S> {
 }
 
 /// Runs a Dynamixel bus on `ep`. `down` damages what the host sends (per read chunk), `up`
-/// each status packet.
+/// each status packet. Replies leave at the time the simulator gives them (each servo's
+/// Return Delay Time register, and the wire time at the baud rate).
 pub fn run_dxl(
     ep: Endpoint,
     cfg: DxlSimConfig,
@@ -260,14 +494,17 @@ pub fn run_dxl(
     Running::spawn("dxl-sim", ep, sim, move |mut io, sim, faults, stop| {
         let mut down = FaultInjector::new(down);
         let mut up = FaultInjector::new(up);
-        let t0 = Instant::now();
-        let now = || t0.elapsed().as_nanos() as u64;
         let mut queue: std::collections::VecDeque<(u64, Vec<u8>)> = Default::default();
         let mut buf = vec![0u8; 4096];
         while !stop.load(Ordering::Relaxed) {
+            if io.service() == Some(PlugEvent::Unplugged) {
+                // Replies on their way and a partial instruction die with the adapter.
+                queue.clear();
+                lock(sim).expire();
+            }
             // Write what is due; sleep precisely for a reply due within 2 ms.
             while let Some((ready, _)) = queue.front() {
-                let t = now();
+                let t = io.now();
                 if *ready > t {
                     let wait = *ready - t;
                     if wait > 2_000_000 {
@@ -280,12 +517,12 @@ pub fn run_dxl(
             }
             let timeout = match queue.front() {
                 Some((ready, _)) => {
-                    Duration::from_nanos(ready.saturating_sub(now()).saturating_sub(2_000_000))
+                    Duration::from_nanos(ready.saturating_sub(io.now()).saturating_sub(2_000_000))
                 }
                 None => Duration::from_millis(5),
             };
             let n = io.read(&mut buf, timeout);
-            let t = now();
+            let t = io.now();
             let mut sim = lock(sim);
             if n == 0 {
                 sim.advance(t);
@@ -303,15 +540,22 @@ pub fn run_dxl(
     })
 }
 
-/// Runs an SLCAN adapter on `ep` (answers at once; cyclic node messages every millisecond).
+/// Runs an SLCAN adapter on `ep`: answers as soon as the adapter has them (at once, or after
+/// its latency or stall, to within about 0.1 ms), cyclic node messages at least every
+/// millisecond.
 pub fn run_slcan(ep: Endpoint, adapter: SlcanAdapterSim) -> Running<SlcanAdapterSim> {
     Running::spawn("slcan-sim", ep, adapter, |mut io, sim, _faults, stop| {
-        let t0 = Instant::now();
         let mut buf = vec![0u8; 4096];
         let mut out = Vec::with_capacity(4096);
         while !stop.load(Ordering::Relaxed) {
-            let n = io.read(&mut buf, Duration::from_millis(1));
-            let t = t0.elapsed().as_nanos() as u64;
+            if io.service() == Some(PlugEvent::Unplugged) {
+                lock(sim).unplug();
+            }
+            let due = lock(sim).next_due();
+            let now = io.now();
+            let wait = due.map_or(1_000_000, |d| d.saturating_sub(now).min(1_000_000));
+            let n = io.read(&mut buf, Duration::from_nanos(wait));
+            let t = io.now();
             out.clear();
             {
                 let mut a = lock(sim);

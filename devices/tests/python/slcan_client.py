@@ -1,6 +1,8 @@
-"""Opens an SLCAN adapter with python-can's `slcan` interface, enables MIT-mode motor 1,
-commands it towards 1 rad and decodes its replies (with this script's own unpacking), then
-asks an ODrive axis for its encoder estimates with a remote frame. Prints one JSON object."""
+"""Opens an SLCAN adapter with python-can's `slcan` interface and drives MIT-mode motor 1 as
+the firmware demands: a command before Enter is ignored, Enter starts with no torque, commands
+then move it towards 1 rad, and after Exit commands are ignored again. Replies are decoded with
+this script's own unpacking. Then it asks an ODrive axis for its encoder estimates with a
+remote frame. Prints one JSON object; the Rust test checks the values."""
 import json
 import struct
 import sys
@@ -45,10 +47,21 @@ def exchange(arb, data=None, remote=False):
     return r
 
 
+ENTER, EXIT = bytes([0xFF] * 7 + [0xFC]), bytes([0xFF] * 7 + [0xFD])
 out = {}
-r = exchange(1, bytes([0xFF] * 7 + [0xFC]))  # enter motor mode
+# Before Enter: answered, but the command is ignored (the motor does not move).
+before = []
+for _ in range(2):
+    motor, p, v, t = reply(exchange(1, command(1.0, 0.0, 20.0, 1.0, 0.0)))
+    before.append(p)
+    time.sleep(0.05)
+out["before_enter"] = before
+r = exchange(1, ENTER)  # enter motor mode
 out["enter_reply_id"] = r.arbitration_id
 out["enter_reply_dlc"] = r.dlc
+time.sleep(0.05)
+# Enter again only polls: motor mode starts with no torque, the motor has not moved.
+out["after_enter"] = reply(exchange(1, ENTER))[1]
 positions = []
 for _ in range(300):
     r = exchange(1, command(1.0, 0.0, 20.0, 1.0, 0.0))
@@ -57,7 +70,14 @@ for _ in range(300):
     positions.append(p)
     time.sleep(0.002)
 out["positions_first_last"] = [positions[0], positions[-1]]
-r = exchange(1, bytes([0xFF] * 7 + [0xFD]))  # exit motor mode
+r = exchange(1, EXIT)  # exit motor mode
+# After Exit: commands are ignored again.
+after = []
+for _ in range(2):
+    motor, p, v, t = reply(exchange(1, command(-1.0, 0.0, 20.0, 1.0, 0.0)))
+    after.append(p)
+    time.sleep(0.05)
+out["after_exit"] = after
 r = exchange((4 << 5) | 0x09, remote=True)  # ODrive node 4: Get_Encoder_Estimates
 out["odrive_reply_id"] = r.arbitration_id
 out["odrive_estimates"] = list(struct.unpack("<ff", bytes(r.data)))
