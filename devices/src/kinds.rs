@@ -18,6 +18,7 @@ use crate::hw::{
     interface_up, SerialHardware, SerialOptions, SlcanHardware, SlcanOptions, SocketCanHardware,
     UdpHardware,
 };
+use crate::link::{Link, LinkOf, Opener};
 use crate::message::Credential;
 use crate::protocol::{
     mit_limits, parse_model_table, CanMotorProtocol, Dxl1Protocol, Dxl1ReadMode, Dxl2Protocol,
@@ -28,7 +29,6 @@ use crate::sim::dxl::DxlSimConfig;
 use crate::sim::fault::FaultConfig;
 use crate::sim::hardware::{CanSimHardware, DxlSimHardware};
 use crate::sim::{LoopbackHardware, SimDevice, SimProtocol, SineHardware};
-use crate::link::{Link, LinkOf, Opener};
 use crate::stage::{Device, Hardware, Protocol, SafeAction};
 
 /// Which stage a kind belongs to.
@@ -1060,7 +1060,8 @@ pub fn build_device(
         "sim" => Box::new(SimDevice::new(cred)),
         "dynamixel_x" => {
             let opt = |k: &str| p.opt_int(k);
-            let models = x_models(p.str("model")?).ok_or_else(|| BuildError::Param("model".into()))?;
+            let models =
+                x_models(p.str("model")?).ok_or_else(|| BuildError::Param("model".into()))?;
             let cfg = DxlXConfig {
                 zero: p.int("zero")?,
                 operating_mode: p.int("operating_mode")? as u8,

@@ -39,13 +39,12 @@ mod queue;
 pub mod sim;
 mod stage;
 
-pub use message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
-pub use outstanding::{Outstanding, Pending};
-pub use queue::{Bounded, Full};
 pub use lifecycle::{DeviceStatus, Failure, Phase, SafeProgress, Startup};
 pub use link::{Link, LinkCounters, LinkOf, LinkState, Opener};
-pub use stage::{
-    Channel, Device, Hardware, HwCounters, HwError, Protocol, ProtocolCounters, SafeAction,
-    TickCtx,
-};
+pub use message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 pub use nix::errno::Errno;
+pub use outstanding::{Outstanding, Pending};
+pub use queue::{Bounded, Full};
+pub use stage::{
+    Channel, Device, Hardware, HwCounters, HwError, Protocol, ProtocolCounters, SafeAction, TickCtx,
+};

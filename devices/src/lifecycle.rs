@@ -176,7 +176,10 @@ impl DeviceStatus {
 
     /// Whether it is driving its actuator.
     pub fn driving(&self) -> bool {
-        matches!(self.phase, Phase::Enabled | Phase::Holding | Phase::Unmanaged)
+        matches!(
+            self.phase,
+            Phase::Enabled | Phase::Holding | Phase::Unmanaged
+        )
     }
 }
 

@@ -424,12 +424,8 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> Link for LinkOf<P, H> {
             let _ = out.push(*r);
         }
         self.early.clear();
-        self.protocol.decode(
-            self.rx.as_slice(),
-            self.rx_fence.as_slice(),
-            out,
-            ctx,
-        );
+        self.protocol
+            .decode(self.rx.as_slice(), self.rx_fence.as_slice(), out, ctx);
         self.rx.clear();
         self.rx_fence.clear();
         self.protocol.expire(out, ctx);

@@ -186,7 +186,12 @@ mod tests {
         assert_eq!(expired, [(2, 1), (1, 2)]);
         assert!(matches!(out.as_slice()[0].data, ReplyData::Missing { .. }));
         assert_eq!(o.len(), 1);
-        assert_eq!(o.resolve(Credential::id(3), u64::MAX, |_| true).unwrap().tick, 2);
+        assert_eq!(
+            o.resolve(Credential::id(3), u64::MAX, |_| true)
+                .unwrap()
+                .tick,
+            2
+        );
         assert!(o.is_empty());
         assert!(o.resolve(Credential::id(3), u64::MAX, |_| true).is_none());
         // The expired ones make their late replies recognisable, once each.

@@ -293,4 +293,3 @@ pub trait Device {
         String::new()
     }
 }
-

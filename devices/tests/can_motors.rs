@@ -110,7 +110,10 @@ fn mit_writes_of_a_tick_combine_into_one_command() {
     // Replies arrive 0.15 ms after the command, i.e. in the next tick's exchange.
     assert_eq!(seen, 999 * 3);
     let c = link.counters();
-    assert_eq!((c.protocol.missing_replies, c.protocol.rejected_packets), (0, 0));
+    assert_eq!(
+        (c.protocol.missing_replies, c.protocol.rejected_packets),
+        (0, 0)
+    );
     for s in link.hardware().expect("the bus is up").snapshots() {
         let target = 0.5 * s.id as f64;
         // 2 s of a kp = 20, kd = 1 servo on J = 0.01, b = 0.05: settled to the quantisation

@@ -328,7 +328,10 @@ fn fault_run(mode: Dxl2ReadMode, cycles: u64, seed: u64) {
             let have = got.get(&(k, i)).copied().unwrap_or([None, None]);
             let [Some((t, pos)), Some((tv, vel))] = have else {
                 // A request of the last cycles may still be waiting for the line to be quiet.
-                assert!(k + 3 >= cycles, "cycle {k} servo {i}: no update at all: {have:?}");
+                assert!(
+                    k + 3 >= cycles,
+                    "cycle {k} servo {i}: no update at all: {have:?}"
+                );
                 continue;
             };
             assert_eq!(t, tv, "one read answers both channels");

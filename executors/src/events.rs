@@ -9,7 +9,7 @@
 use std::sync::mpsc::{self, Receiver, SyncSender, TryRecvError, TrySendError};
 use std::time::{Duration, Instant};
 
-use conductor_devices::device::{X_MODELS, AX_MODELS, MX_MODELS};
+use conductor_devices::device::{AX_MODELS, MX_MODELS, X_MODELS};
 use conductor_devices::{Failure, Phase};
 
 use crate::manifest::Subsystem;
@@ -51,7 +51,10 @@ impl Names {
             .map(|d| {
                 let bus = &sub.hardware[sub.protocols[d.protocol].hardware].name;
                 (
-                    format!("device {:?} ({}, id {} on bus {bus:?})", d.name, d.kind, d.credential.id),
+                    format!(
+                        "device {:?} ({}, id {} on bus {bus:?})",
+                        d.name, d.kind, d.credential.id
+                    ),
                     expected_model(&d.kind, &d.params),
                 )
             })
@@ -70,11 +73,13 @@ impl Names {
         let link = |i: usize| self.links.get(i).map_or("a bus", String::as_str);
         let tag = &self.tag;
         match *e {
-            Event::BusDown { link: l, cause } => format!(
+            Event::BusDown { link: l, cause } => {
+                format!(
                 "{tag}: {} vanished{}: its states are STALE; reopening it (10 ms … 1 s back-off)",
                 link(l),
                 cause.map(|c| format!(" ({c}: {})", c.desc())).unwrap_or_default()
-            ),
+            )
+            }
             Event::BusUp { link: l, outage_ns } => format!(
                 "{tag}: {} is back after {:.2} s; bringing its devices up again",
                 link(l),
@@ -85,15 +90,17 @@ impl Names {
                 phase,
                 failure,
             } => match (phase, failure) {
-                (Phase::Failed, Some(f)) | (Phase::Disabled, Some(f)) => format!(
-                    "{tag}: {}: {}",
-                    dev(device),
-                    self.failure(device, f)
-                ),
+                (Phase::Failed, Some(f)) | (Phase::Disabled, Some(f)) => {
+                    format!("{tag}: {}: {}", dev(device), self.failure(device, f))
+                }
                 (p, _) => format!("{tag}: {} is {}", dev(device), p.name()),
             },
             Event::Fault { device, bits } => {
-                format!("{tag}: {} reports a fault: {}", dev(device), fault_text(bits))
+                format!(
+                    "{tag}: {} reports a fault: {}",
+                    dev(device),
+                    fault_text(bits)
+                )
             }
             Event::FaultCleared { device } => format!("{tag}: {}: fault cleared", dev(device)),
             Event::Tripped { device, cause } => format!(

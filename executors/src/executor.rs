@@ -57,6 +57,8 @@ pub struct Executor {
     events: EventLog,
     names: Names,
     optional: Vec<bool>,
+    /// During bring-up, each device's phases are told once, at its end, not one by one.
+    bringing_up: bool,
 }
 
 /// How a stop went.
@@ -141,6 +143,7 @@ impl Executor {
             events: EventLog::spawn(names.clone()),
             names,
             optional: sub.devices.iter().map(|d| d.optional).collect(),
+            bringing_up: false,
         })
     }
 
@@ -179,8 +182,13 @@ impl Executor {
         if published > 0 && publisher.notify_tick().is_err() {
             h.publish_errors += 1;
         }
-        let events = &mut self.events;
-        stages.drain_events(|e| events.send(e));
+        let (events, quiet) = (&mut self.events, self.bringing_up);
+        stages.drain_events(|e| {
+            let phase = matches!(e, crate::stages::Event::Phase { .. });
+            if !(quiet && phase) {
+                events.send(e);
+            }
+        });
         if now_ns >= h.next_stats_ns {
             self.publish_stats(now_ns);
         }
@@ -280,8 +288,10 @@ impl Executor {
                 "{who}: safe action NOT confirmed{}",
                 match why {
                     Unconfirmed::BusDown => ": its bus is gone",
-                    Unconfirmed::NotUp => ": the device is not up (it never answered, or is being brought up again)",
-                    Unconfirmed::NoAnswer => " within the time allowed (no answer, no acknowledgement)",
+                    Unconfirmed::NotUp =>
+                        ": the device is not up (it never answered, or is being brought up again)",
+                    Unconfirmed::NoAnswer =>
+                        " within the time allowed (no answer, no acknowledgement)",
                 }
             ));
         }
@@ -298,11 +308,18 @@ impl Executor {
     /// Runs ticks (sleep-based, at the base period) until every device has been brought up
     /// (enabled, limp, or failed), `timeout_ns` has passed, or `stop` is set. Returns the last
     /// slot and what came up.
-    pub fn bring_up(&mut self, period_ns: u64, timeout_ns: u64, stop: &AtomicBool) -> (u64, BringUp) {
+    pub fn bring_up(
+        &mut self,
+        period_ns: u64,
+        timeout_ns: u64,
+        stop: &AtomicBool,
+    ) -> (u64, BringUp) {
         let t0 = monotonic_ns();
+        self.bringing_up = true;
         let last = run_from(self, period_ns, 0, stop, 0, |x| {
             x.stages.settled() || monotonic_ns().saturating_sub(t0) >= timeout_ns
         });
+        self.bringing_up = false;
         let mut b = BringUp {
             settled: self.stages.settled(),
             ..BringUp::default()
@@ -313,7 +330,8 @@ impl Executor {
             let who = names.device(i);
             let optional = self.optional.get(i).copied().unwrap_or(false);
             match (st.phase, st.failure) {
-                (conductor_devices::Phase::Failed, Some(f)) | (conductor_devices::Phase::Disabled, Some(f)) => {
+                (conductor_devices::Phase::Failed, Some(f))
+                | (conductor_devices::Phase::Disabled, Some(f)) => {
                     let line = format!("{who}: {}", names.failure(i, f));
                     if optional {
                         b.missing.push(line);
@@ -329,14 +347,14 @@ impl Executor {
                         b.failed.push(line);
                     }
                 }
-                (p, _) if st.managed() => {
-                    b.up.push(format!("{who} is {}: {}", p.name(), self.stages.describe(i)))
-                }
+                (p, _) if st.managed() => b.up.push(format!(
+                    "{who} is {}: {}",
+                    p.name(),
+                    self.stages.describe(i)
+                )),
                 _ => {}
             }
         }
-        // The phase changes of the bring-up are in the lines above.
-        self.stages.drain_events(|_| {});
         (last, b)
     }
 

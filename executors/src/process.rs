@@ -235,7 +235,14 @@ fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     if writeln!(out, "{READY}").and_then(|_| out.flush()).is_err() {
         // Nobody reads our stdout any more (the launcher is gone): still run.
     }
-    let last = run_from(&mut exec, sub.period_ns, sub.spin_ns, stop.flag(), last + 1, |_| false);
+    let last = run_from(
+        &mut exec,
+        sub.period_ns,
+        sub.spin_ns,
+        stop.flag(),
+        last + 1,
+        |_| false,
+    );
     let r = exec.shutdown(sub.period_ns, last + 1, STOP_CONFIRM_NS);
     stopped(&tag, &exec, &r)
 }

@@ -358,7 +358,9 @@ impl Stages {
             let safe = writable.then(|| match d.safe {
                 SafeSpec::Hold => SafeAction::Hold,
                 SafeSpec::TorqueOff => SafeAction::TorqueOff,
-                SafeSpec::Damp { kd: k } => SafeAction::Damp { kd: k.unwrap_or(kd) },
+                SafeSpec::Damp { kd: k } => SafeAction::Damp {
+                    kd: k.unwrap_or(kd),
+                },
                 SafeSpec::Setpoint { state, value } => {
                     let s = &sub.states[state];
                     SafeAction::Setpoint {
@@ -857,7 +859,10 @@ impl Stages {
             d.safe.is_some()
                 && d.status.safe == SafeProgress::Pending
                 && self.links[d.link].state == LinkState::Up
-                && !matches!(d.status.phase, Phase::Offline | Phase::Probing | Phase::Failed)
+                && !matches!(
+                    d.status.phase,
+                    Phase::Offline | Phase::Probing | Phase::Failed
+                )
         });
         !waiting && self.links.iter().all(|l| l.link.flushed())
     }
@@ -866,13 +871,15 @@ impl Stages {
     /// safe action), with why: `None` means it got no confirmation in time.
     pub fn unconfirmed(&self) -> impl Iterator<Item = (usize, Unconfirmed)> + '_ {
         self.devices.iter().enumerate().filter_map(|(i, d)| {
-            if d.safe.is_none() || !d.status.managed() || d.status.safe == SafeProgress::Confirmed
-            {
+            if d.safe.is_none() || !d.status.managed() || d.status.safe == SafeProgress::Confirmed {
                 return None;
             }
             let why = if self.links[d.link].state != LinkState::Up {
                 Unconfirmed::BusDown
-            } else if matches!(d.status.phase, Phase::Offline | Phase::Probing | Phase::Failed) {
+            } else if matches!(
+                d.status.phase,
+                Phase::Offline | Phase::Probing | Phase::Failed
+            ) {
                 Unconfirmed::NotUp
             } else {
                 Unconfirmed::NoAnswer

@@ -1,76 +1,91 @@
 //! End to end with real processes: the mini-Hubo right leg manifest
 //! (deploy/minihubo-right-leg-dxl.toml) run by `conductor-executor` against the Dynamixel bus
-//! simulator on a pseudo-terminal. All 6 joint positions are published at 250 Hz; a command frame
-//! of 6 setpoints moves all 6 servos with ONE SYNC WRITE, counted by the simulator; and the bytes
-//! on the wire per cycle are the protocol minimum for what the manifest reads and writes.
+//! simulator on a pseudo-terminal, whose servos power up as real X-series servos do: torque off,
+//! goals ignored until enabled.
+//!
+//! * Bring-up: every servo is pinged, its configuration read, and its Goal Position set to
+//!   where it is BEFORE its torque is enabled (checked on the simulator's instruction log);
+//!   nothing moved.
+//! * All 6 joint positions are published at 250 Hz; a command frame of 6 setpoints moves all 6
+//!   servos with ONE SYNC WRITE, counted by the simulator.
+//! * In steady state the bytes on the wire per cycle are the protocol minimum for what the
+//!   manifest reads and writes.
+//! * SIGTERM: each servo's hold is written and read back; the executor says so and exits 0.
 
-use std::io::{BufRead, BufReader};
-use std::path::Path;
-use std::process::{Child, Command, Stdio};
+mod support;
+
 use std::time::{Duration, Instant};
 
 use conductor_bus::{Bus, Controller, Domain, StateSubscriber};
 use conductor_devices::sim::dxl::DxlSimConfig;
 use conductor_devices::sim::fault::FaultConfig;
 use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty};
+use support::edge::{shipped, Exec};
 
 const JOINTS: [&str; 6] = ["RHY", "RHR", "RHP", "RKP", "RAP", "RAR"];
 
-struct Exec(Child);
-
-impl Drop for Exec {
-    fn drop(&mut self) {
-        // SIGTERM: an orderly stop (devices to their safe state); the test waits for it.
-        let _ = nix::sys::signal::kill(
-            nix::unistd::Pid::from_raw(self.0.id() as i32),
-            nix::sys::signal::Signal::SIGTERM,
-        );
-        let _ = self.0.wait();
-    }
-}
+/// Torque Enable and Goal Position in the X-series control table.
+const TORQUE: u16 = 64;
+const GOAL: u16 = 116;
 
 #[test]
 fn minihubo_leg_on_the_dynamixel_simulator() {
-    // The bus: 6 XM430 servos on a pty, in this process, baud-accurate reply timing.
+    // The bus: 6 XM430 servos on a pty, in this process, baud-accurate reply timing; they power
+    // up with torque off, as real servos do.
     let pty = Pty::open(None).unwrap();
     let port = pty.path().to_string();
+    let cfg = DxlSimConfig::default();
+    assert!(!cfg.torque_on, "the simulator powers up like the hardware");
     let sim = run_dxl(
         Endpoint::Pty(pty),
-        DxlSimConfig::default(),
+        cfg,
         FaultConfig::default(),
         FaultConfig::default(),
     );
+    sim.sim().start_log();
 
     // The shipped manifest; only the hardware's port changes (to this test's pty).
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap();
-    let text = std::fs::read_to_string(root.join("deploy/minihubo-right-leg-dxl.toml")).unwrap();
-    assert!(text.contains("port = \"/tmp/conductor-dxl0\""));
-    let text = text.replace(
-        "port = \"/tmp/conductor-dxl0\"",
-        &format!("port = \"{port}\""),
+    let manifest = shipped(
+        "minihubo-right-leg-dxl.toml",
+        &[(
+            "port = \"/tmp/conductor-dxl0\"",
+            &format!("port = \"{port}\""),
+        )],
     );
-    let manifest =
-        std::env::temp_dir().join(format!("conductor-dxl-e2e-{}.toml", std::process::id()));
-    std::fs::write(&manifest, text).unwrap();
-
     let d = Domain::unique("dxl-e2e").unwrap();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_conductor-executor"))
-        .arg("--manifest")
-        .arg(&manifest)
-        .args(["--subsystem", "right_leg", "--domain", d.name()])
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut out = BufReader::new(child.stdout.take().unwrap());
-    let exec = Exec(child);
-    let mut line = String::new();
-    while !line.contains("READY") {
-        line.clear();
-        assert!(
-            out.read_line(&mut line).unwrap() > 0,
-            "executor exited before READY"
-        );
+    let exec =
+        Exec::start(&manifest, "right_leg", &d).unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+
+    // Bring-up, on the wire: per servo a PING, then Goal Position = its present position
+    // (2048), then Torque Enable = 1, in that order.
+    {
+        let s = sim.sim();
+        let log = s.instruction_log();
+        for id in 1..=6u8 {
+            let mine: Vec<_> = log.iter().filter(|r| r.1 == id).collect();
+            let ping = mine.iter().position(|r| r.2 == 0x01).expect("pinged");
+            let torque_on = mine
+                .iter()
+                .position(|r| r.3 == TORQUE && r.4 == [1])
+                .unwrap_or_else(|| panic!("servo {id}: torque never enabled: {mine:?}"));
+            let goal = mine
+                .iter()
+                .position(|r| r.3 == GOAL && r.4 == 2048i32.to_le_bytes())
+                .unwrap_or_else(|| panic!("servo {id}: goal never set where it is: {mine:?}"));
+            assert!(ping < goal && goal < torque_on, "servo {id}: {mine:?}");
+            let servo = s.servo(id).unwrap();
+            assert!(servo.torque_on(), "servo {id}");
+            assert_eq!(servo.present_position(), 2048, "servo {id}: nothing moved");
+        }
     }
+    let log = exec.log();
+    assert_eq!(
+        log.iter()
+            .filter(|l| l.contains("is enabled") && l.contains("xm430-w350 (model 1020)"))
+            .count(),
+        6,
+        "each servo's bring-up is reported: {log:#?}"
+    );
 
     let bus = Bus::open(&d, "e2e").unwrap();
     let mut subs: Vec<StateSubscriber> = JOINTS
@@ -82,6 +97,7 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
     for s in subs.iter_mut() {
         while s.receive().unwrap().is_some() {}
     }
+    let steady = sim.sim().stats();
     let window = Duration::from_secs(1);
     let t0 = Instant::now();
     let mut counts = [0u32; 6];
@@ -90,13 +106,14 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
             while let Some(x) = s.receive().unwrap() {
                 counts[i] += 1;
                 assert_eq!(x.value, 0.0, "servos at rest in the middle (2048)");
+                assert_eq!(x.status & conductor_bus::status::DISABLED, 0, "enabled");
             }
         }
         std::thread::sleep(Duration::from_millis(5));
     }
     for (j, c) in JOINTS.iter().zip(counts) {
-        // 250 ± 3 (window edges, scheduling on a 2-CPU machine).
-        assert!((247..=253).contains(&c), "{j}: {c} samples in 1 s");
+        // 250 ± 4 (window edges, scheduling on a 2-CPU machine without real-time priority).
+        assert!((246..=254).contains(&c), "{j}: {c} samples in 1 s");
     }
 
     // One frame of six setpoints → ONE SYNC WRITE on the wire.
@@ -137,18 +154,45 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
         assert!((v - targets[i]).abs() <= 4.0 * pulse, "{}: {v}", JOINTS[i]);
     }
 
-    // The wire, per cycle: SYNC READ of Present Position = 10 + 4 + 6 bytes out, 6 × (11 + 4)
-    // back (positions near 2048 contain no FF FF FD: no stuffing); the only other packets are
-    // the SYNC WRITEs counted above.
-    drop(exec);
+    // The wire in steady state, per cycle: SYNC READ of Present Position = 10 + 4 + 6 bytes
+    // out, 6 × (11 + 4) back (positions near 2048 contain no FF FF FD: no stuffing); the only
+    // other packet is the SYNC WRITE counted above.
     let s = sim.sim().stats();
-    assert_eq!(
-        s.packets_in,
-        s.sync_read + s.sync_write,
-        "nothing else was sent: {s:?}"
+    let (packets, reads) = (
+        s.packets_in - steady.packets_in,
+        s.sync_read - steady.sync_read,
     );
-    assert_eq!(s.bytes_in, s.sync_read * 20 + s.sync_write_bytes, "{s:?}");
-    assert_eq!(s.bytes_out, s.sync_read * 90, "{s:?}");
+    let writes = s.sync_write - steady.sync_write;
+    assert_eq!(packets, reads + writes, "nothing else was sent: {s:?}");
+    assert_eq!(writes, 1);
+    assert_eq!(
+        s.bytes_in - steady.bytes_in,
+        reads * 20 + (s.sync_write_bytes - steady.sync_write_bytes),
+        "{s:?}"
+    );
+    assert_eq!(s.bytes_out - steady.bytes_out, reads * 90, "{s:?}");
     assert_eq!(s.discarded_in, 0);
+
+    // SIGTERM: every servo holds where it is, read back before the executor says so.
+    let mut exec = exec;
+    let status = exec.stop();
+    assert!(status.success(), "{status}: {:#?}", exec.log());
+    assert!(
+        exec.log()
+            .iter()
+            .any(|l| l.contains("devices in their safe state (6 confirmed on the wire)")),
+        "{:#?}",
+        exec.log()
+    );
+    let s = sim.sim();
+    for (id, v) in (1..=6u8).zip(targets) {
+        let servo = s.servo(id).unwrap();
+        assert!(servo.torque_on(), "hold keeps torque on");
+        let raw = (v / (2.0 * std::f64::consts::PI / 4096.0)).round() as i32 + 2048;
+        assert!(
+            (servo.goal_position() - raw).abs() <= 3,
+            "holds where it is"
+        );
+    }
     let _ = std::fs::remove_file(&manifest);
 }

@@ -326,7 +326,13 @@ fn replies_reach_devices_by_credential_and_strangers_are_counted() {
     // A reply from id 7 (no such device) and one for device 2 (index 1) with a value.
     rig.inject[0].borrow_mut().extend([
         Reply::answer(Credential::id(7), Op::Sample, ReplyData::Value(3.0), 1, MS),
-        Reply::answer(Credential::id(2), Op::Sample, ReplyData::Value(0.25), 1, 123),
+        Reply::answer(
+            Credential::id(2),
+            Op::Sample,
+            ReplyData::Value(0.25),
+            1,
+            123,
+        ),
     ]);
     let out = rig.step();
     assert_eq!(rig.stages.counters().unmatched_replies, 1);

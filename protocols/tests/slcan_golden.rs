@@ -42,10 +42,13 @@ fn kernel_examples_encode_and_decode() {
             Ok(Command::Transmit(frame))
         );
         // Host side reads the same line as a received frame.
-        let got = Response::decode(Line {
-            body: text.as_bytes(),
-            terminator: CR,
-        }, true)
+        let got = Response::decode(
+            Line {
+                body: text.as_bytes(),
+                terminator: CR,
+            },
+            true,
+        )
         .unwrap();
         assert_eq!(
             got,
@@ -60,10 +63,13 @@ fn kernel_examples_encode_and_decode() {
 #[test]
 fn longest_line_is_slc_mtu() {
     let body = b"T1111222281122334455667788EA5F";
-    let r = Response::decode(Line {
-        body,
-        terminator: CR,
-    }, true)
+    let r = Response::decode(
+        Line {
+            body,
+            terminator: CR,
+        },
+        true,
+    )
     .unwrap();
     let frame = CanFrame::extended(
         0x1111_2222,
@@ -359,10 +365,13 @@ fn malformed_frames_are_rejected() {
     ];
     for b in bad {
         assert!(
-            Response::decode(Line {
-                body: b,
-                terminator: CR
-            }, true)
+            Response::decode(
+                Line {
+                    body: b,
+                    terminator: CR
+                },
+                true
+            )
             .is_err(),
             "{}",
             String::from_utf8_lossy(b)
@@ -391,14 +400,26 @@ fn extra_digits_without_timestamps_are_malformed() {
     s.set_timestamps(true);
     let mut n = 0;
     s.feed(line, |r| {
-        assert!(matches!(r, Response::Frame { timestamp: Some(0xABCD), .. }));
+        assert!(matches!(
+            r,
+            Response::Frame {
+                timestamp: Some(0xABCD),
+                ..
+            }
+        ));
         n += 1;
     });
     assert_eq!(n, 1);
     // And a well-formed frame line without timestamp is a frame either way.
     let mut s = HostScanner::<64>::new();
     s.feed(b"t0006018A3C7AD838\r", |r| {
-        assert!(matches!(r, Response::Frame { timestamp: None, .. }));
+        assert!(matches!(
+            r,
+            Response::Frame {
+                timestamp: None,
+                ..
+            }
+        ));
         n += 1;
     });
     assert_eq!(n, 2);

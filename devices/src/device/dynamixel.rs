@@ -212,7 +212,12 @@ impl ControlTable for XSeries {
             })
         };
         [
-            item("operating_mode", OPERATING_MODE, 1, Some(self.cfg.operating_mode as i64)),
+            item(
+                "operating_mode",
+                OPERATING_MODE,
+                1,
+                Some(self.cfg.operating_mode as i64),
+            ),
             item(
                 "return_delay_us",
                 RETURN_DELAY_TIME,
@@ -221,8 +226,18 @@ impl ControlTable for XSeries {
             ),
             item("current_limit", CURRENT_LIMIT, 2, c.current_limit),
             item("velocity_limit", VELOCITY_LIMIT, 4, c.velocity_limit),
-            item("max_position_limit", MAX_POSITION_LIMIT, 4, c.position_limits.1),
-            item("min_position_limit", MIN_POSITION_LIMIT, 4, c.position_limits.0),
+            item(
+                "max_position_limit",
+                MAX_POSITION_LIMIT,
+                4,
+                c.position_limits.1,
+            ),
+            item(
+                "min_position_limit",
+                MIN_POSITION_LIMIT,
+                4,
+                c.position_limits.0,
+            ),
             item(
                 "status_return_level",
                 STATUS_RETURN_LEVEL,
@@ -238,7 +253,8 @@ impl ControlTable for XSeries {
     }
 
     fn needs_torque_off(&self, addr: u16) -> bool {
-        addr < x_table::TORQUE_ENABLE || (x_table::INDIRECT_ADDRESS..x_table::INDIRECT_DATA).contains(&addr)
+        addr < x_table::TORQUE_ENABLE
+            || (x_table::INDIRECT_ADDRESS..x_table::INDIRECT_DATA).contains(&addr)
     }
 
     fn zero_goal(&self) -> Option<(u16, u8)> {
@@ -430,7 +446,12 @@ impl RegDevice<Dxl1Series> {
     }
 
     /// As [`new`](Self::new), writing Return Delay Time at bring-up.
-    pub fn with_return_delay(cred: Credential, model: Dxl1Model, zero: i64, us: Option<u32>) -> Self {
+    pub fn with_return_delay(
+        cred: Credential,
+        model: Dxl1Model,
+        zero: i64,
+        us: Option<u32>,
+    ) -> Self {
         Self::with_table(
             cred,
             Dxl1Series {

@@ -501,7 +501,12 @@ impl Device for MitMotor {
         }
         if self.sampled & (1 << mit_channel::TEMPERATURE) != 0 && vals.is_some() {
             let t = self.temperature.map(f64::from);
-            let _ = out.push(Update::from_reply(reply, mit_channel::TEMPERATURE, t, fault));
+            let _ = out.push(Update::from_reply(
+                reply,
+                mit_channel::TEMPERATURE,
+                t,
+                fault,
+            ));
         }
     }
 
@@ -521,7 +526,9 @@ impl Device for MitMotor {
             }
         }
         let op = match action {
-            SafeAction::Hold | SafeAction::Damp { .. } if self.last_p.is_none() || !self.enabled => {
+            SafeAction::Hold | SafeAction::Damp { .. }
+                if self.last_p.is_none() || !self.enabled =>
+            {
                 return self.safe(SafeAction::TorqueOff, ctx, out)
             }
             SafeAction::TorqueOff => {

@@ -275,6 +275,12 @@ impl<T: ControlTable> RegDevice<T> {
         self.layout
     }
 
+    /// The address channel `i` is read at: its register, or its indirect data (after
+    /// [`Device::configure_reads`]).
+    pub fn read_address(&self, i: usize) -> Option<u16> {
+        *self.read_at.get(i)?
+    }
+
     /// Values rejected by the range check since start (damaged packets that passed the
     /// CRC/checksum).
     pub fn range_rejects(&self) -> u64 {
@@ -377,7 +383,10 @@ impl<T: ControlTable> RegDevice<T> {
             }
             Step::Align => {
                 self.life.n_expect = 0;
-                match self.hold.and_then(|(i, _)| self.table[i].read.map(|a| (a, self.table[i].len))) {
+                match self
+                    .hold
+                    .and_then(|(i, _)| self.table[i].read.map(|a| (a, self.table[i].len)))
+                {
                     Some((addr, len)) => {
                         self.life.expect(addr, len, None);
                         self.push_read(addr, len, ctx, out);
@@ -435,11 +444,7 @@ impl<T: ControlTable> RegDevice<T> {
         match l.step {
             Step::Probe | Step::ModelRead | Step::ReadConfig => l.fail(Failure::NoAnswer),
             Step::WriteConfig => {
-                let bad = l
-                    .expected()
-                    .iter()
-                    .find(|e| e.got != e.want)
-                    .copied();
+                let bad = l.expected().iter().find(|e| e.got != e.want).copied();
                 let f = match bad {
                     Some(e) => Failure::ConfigRefused {
                         addr: e.addr,
@@ -541,8 +546,12 @@ impl<T: ControlTable> RegDevice<T> {
             }
             Step::Align => {
                 let Some((i, _)) = self.hold else { return };
-                let Some(addr) = self.table[i].read else { return };
-                let Some(bits) = self.life.got(addr) else { return };
+                let Some(addr) = self.table[i].read else {
+                    return;
+                };
+                let Some(bits) = self.life.got(addr) else {
+                    return;
+                };
                 let raw = self.table[i].decode_raw(bits);
                 let (lo, hi) = self.goal_range().unwrap_or((i64::MIN, i64::MAX));
                 if raw < lo || raw > hi {
@@ -613,7 +622,9 @@ impl<T: ControlTable> RegDevice<T> {
             (Step::Probe, ReplyData::Ping { model, .. }) => {
                 self.life.status.model = model.or(self.life.status.model);
                 match model {
-                    Some(m) if !self.model_ok(m) => self.life.fail(Failure::WrongModel { found: m }),
+                    Some(m) if !self.model_ok(m) => {
+                        self.life.fail(Failure::WrongModel { found: m })
+                    }
                     Some(_) => {
                         self.life.status.phase = Phase::Configuring;
                         self.life.go(Step::ReadConfig);
@@ -621,9 +632,12 @@ impl<T: ControlTable> RegDevice<T> {
                     None => self.life.go(Step::ModelRead),
                 }
             }
-            (Step::Probe | Step::Reboot, ReplyData::Missing { op: Op::Ping | Op::Reboot }) => {
-                self.retry(now)
-            }
+            (
+                Step::Probe | Step::Reboot,
+                ReplyData::Missing {
+                    op: Op::Ping | Op::Reboot,
+                },
+            ) => self.retry(now),
             (Step::Reboot, ReplyData::Ack) => {
                 self.life.go(Step::Probe);
                 self.life.status.phase = Phase::Probing;
@@ -643,7 +657,12 @@ impl<T: ControlTable> RegDevice<T> {
                     self.step_done(now);
                 }
             }
-            (_, ReplyData::Missing { op: Op::Read { addr, len } }) => {
+            (
+                _,
+                ReplyData::Missing {
+                    op: Op::Read { addr, len },
+                },
+            ) => {
                 let waiting = self
                     .life
                     .expected()
@@ -996,7 +1015,10 @@ impl<T: ControlTable> Device for RegDevice<T> {
         let mut slot = 0u16;
         for &(a, l) in &seen[..n_seen] {
             for i in 0..self.table.len() {
-                if self.table[i].read == Some(a) && self.table[i].len as u16 == l && sampled.contains(&i) {
+                if self.table[i].read == Some(a)
+                    && self.table[i].len as u16 == l
+                    && sampled.contains(&i)
+                {
                     self.read_at[i] = Some(ind.data + slot);
                 }
             }
@@ -1029,7 +1051,10 @@ impl<T: ControlTable> Device for RegDevice<T> {
                 self.layout.indirect, self.layout.contiguous
             )
         } else if self.layout.contiguous > 0 {
-            format!("reads its registers' contiguous span, {} B per cycle", self.layout.contiguous)
+            format!(
+                "reads its registers' contiguous span, {} B per cycle",
+                self.layout.contiguous
+            )
         } else {
             "reads nothing each cycle".into()
         };

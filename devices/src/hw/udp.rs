@@ -54,7 +54,9 @@ impl UdpHardware {
 
 fn hw_error(e: io::Error) -> HwError {
     // OS errors carry their number; io::Error builds no text for them.
-    HwError::Io(nix::errno::Errno::from_raw(e.raw_os_error().unwrap_or(libc::EIO)))
+    HwError::Io(nix::errno::Errno::from_raw(
+        e.raw_os_error().unwrap_or(libc::EIO),
+    ))
 }
 
 impl Hardware for UdpHardware {

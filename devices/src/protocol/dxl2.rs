@@ -263,7 +263,11 @@ mod tests {
         // Past the reply's expected end, but it has not come: it may still (until the deadline,
         // expected end + 1 ms timeout), and a packet now would collide with it.
         p.encode(&[], &mut out, ctx(10));
-        assert_eq!(out.len(), first, "nothing sent while a reply may still come");
+        assert_eq!(
+            out.len(),
+            first,
+            "nothing sent while a reply may still come"
+        );
         // The deadline passes with the reply missing: the line must then stay quiet for one
         // more timeout, so that a late reply is not taken for the next transaction's.
         let mut replies = Bounded::with_capacity(8);

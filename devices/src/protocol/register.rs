@@ -184,7 +184,13 @@ pub(crate) struct Core {
 impl Core {
     /// Room for `devices` devices and `in_flight` read requests; a PING's status carries
     /// `ping_len` data bytes.
-    pub fn new(timing: Timing, max_id: u8, devices: usize, in_flight: usize, ping_len: u16) -> Self {
+    pub fn new(
+        timing: Timing,
+        max_id: u8,
+        devices: usize,
+        in_flight: usize,
+        ping_len: u16,
+    ) -> Self {
         let devices = devices.max(1);
         let in_flight = in_flight.max(devices);
         Self {
@@ -301,7 +307,9 @@ impl Core {
     }
 
     pub fn has_work(&self) -> bool {
-        !self.want_reads.is_empty() || !self.want_writes.is_empty() || !self.want_specials.is_empty()
+        !self.want_reads.is_empty()
+            || !self.want_writes.is_empty()
+            || !self.want_specials.is_empty()
     }
 
     /// Takes the queued writes with the same address and length as the first one, into
@@ -501,7 +509,9 @@ impl Core {
         let Some(x) = self
             .txns
             .iter()
-            .filter(|x| x.active && x.fast && x.end_pos <= fence && x.entries.iter().any(|e| !e.done))
+            .filter(|x| {
+                x.active && x.fast && x.end_pos <= fence && x.entries.iter().any(|e| !e.done)
+            })
             .min_by_key(|x| x.seq)
         else {
             return false;

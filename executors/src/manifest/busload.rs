@@ -18,7 +18,8 @@
 //! * **Dynamixel 2.0** (UART, 8N1: 10 bits a byte at the hardware's `baud`): one SYNC WRITE per
 //!   register written, 14 + n·(1 + len) bytes for n servos; one read transaction for the servos
 //!   with queued reads, each reading the span from its lowest to its highest register end
-//!   (L bytes): SYNC READ (14 + n bytes) when every servo reads the same span, else BULK READ
+//!   (L bytes; an X-series servo whose registers are far apart reads them through indirect
+//!   addressing, L = the sum of their lengths, as the device itself decides): SYNC READ (14 + n bytes) when every servo reads the same span, else BULK READ
 //!   (10 + 5n), answered by one status packet per servo (11 + L bytes) after the servos' Return
 //!   Delay Time each; with `read = "fast_sync"` the same instructions in their FAST form,
 //!   answered by one combined packet (8 + Σ(4 + L) bytes) after one return delay. Byte stuffing
@@ -38,6 +39,7 @@
 //! * **Simulated** protocols (`sim`) have no wire; unknown kinds no model: no load.
 
 use conductor_devices::device::{Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX, RegChannel};
+use conductor_devices::Device as _;
 
 use super::Subsystem;
 
@@ -477,11 +479,25 @@ impl Subsystem {
                 continue;
             }
             let table = match (d.kind.as_str(), proto) {
-                ("dynamixel_x", Proto::Dxl2 { .. }) => Some(
-                    DynamixelX::new(d.credential, DxlXConfig::default())
-                        .table()
-                        .to_vec(),
-                ),
+                ("dynamixel_x", Proto::Dxl2 { .. }) => {
+                    // The device picks its read layout from what its states sample (indirect
+                    // addressing when it reads fewer bytes than the registers' span): ask it.
+                    let mut x = DynamixelX::new(d.credential, DxlXConfig::default());
+                    let sampled: Vec<usize> = self
+                        .states
+                        .iter()
+                        .filter(|s| s.device == i && s.readable)
+                        .map(|s| s.channel)
+                        .collect();
+                    x.configure_reads(&sampled);
+                    let mut t = x.table().to_vec();
+                    for (k, r) in t.iter_mut().enumerate() {
+                        if r.read.is_some() {
+                            r.read = x.read_address(k);
+                        }
+                    }
+                    Some(t)
+                }
                 ("dynamixel1", Proto::Dxl1 { .. }) => Some(
                     Dynamixel1::new(d.credential, Dxl1Model::Ax, 512)
                         .table()
@@ -892,7 +908,7 @@ mod tests {
             ("v", "velocity", false),
             ("i", "current", false),
             ("t", "temperature", false),
-            ("st", "state", true),
+            ("st", "state", false),
         ] {
             s += &format!(
                 "[subsystems.q.states.{name}]\ndevice = \"ax\"\nchannel = \"{ch}\"\nwritable = {w}\n"
@@ -979,9 +995,10 @@ mod tests {
     #[test]
     fn switches_and_simulated_buses() {
         let mut text = dxl_bus(6, "", POSITION);
-        text += "[subsystems.leg.states.te]\ndevice = \"s1\"\nchannel = \"torque_enable\"\nwritable = true\n";
+        text +=
+            "[subsystems.leg.states.te]\ndevice = \"s1\"\nchannel = \"enable\"\nwritable = true\n";
         let l = load(&text, 0);
-        // torque_enable is still read (1 byte at 64: servo 1 now spans 64..136).
+        // `enable` is written now and then, not every cycle (and has no register).
         assert_eq!(
             l.busiest.parts[0],
             Part {

@@ -12,6 +12,8 @@ use std::time::{Duration, Instant};
 use conductor_bus::{monotonic_ns, Bus, Domain, StateSample, StateSubscriber};
 use conductor_executor::launcher::LaunchOptions;
 
+pub mod edge;
+
 pub const EXECUTOR: &str = env!("CARGO_BIN_EXE_conductor-executor");
 pub const LAUNCHER: &str = env!("CARGO_BIN_EXE_conductor-launch");
 pub const STRESS: &str = env!("CARGO_BIN_EXE_conductor-stress");

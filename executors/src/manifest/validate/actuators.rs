@@ -1,5 +1,6 @@
-//! Warnings about actuators: one nothing can command, and one the watchdog switches off with no
-//! way to switch it back on.
+//! Warnings about actuators: one nothing can command, and one that nothing could enable again
+//! after a trip (the watchdog, or a fault of the device, trips it; a tripped device refuses
+//! setpoints until its `enable` channel is written 1).
 //!
 //! An actuator is a device whose kind has a writable `position` channel (Dynamixel servos, MIT
 //! motors, ODrive axes); what a kind offers is read from its channels, not from a list of kinds.
@@ -7,7 +8,7 @@
 use std::ops::Range;
 
 use super::super::diag::{quote_key, Diags};
-use super::super::{SafeSpec, Subsystem};
+use super::super::Subsystem;
 
 /// Checks every device of `sub`; `devices[i]` is where device `i`'s table starts and its key.
 pub(super) fn check(d: &mut Diags, sub: &Subsystem, devices: &[(Range<usize>, String)]) {
@@ -30,16 +31,16 @@ pub(super) fn check(d: &mut Diags, sub: &Subsystem, devices: &[(Range<usize>, St
                 key,
                 format!(
                     "device {:?} (kind {:?}) is an actuator, but no writable state is bound to \
-                     it: nothing can command it, it only reports (and keeps whatever it does \
-                     when the executor starts); if it should move, bind a state to one of its \
-                     writable channels (e.g. position) with writable = true",
+                     it: nothing can command it; it is enabled at start and holds where it is \
+                     (startup = \"hold_off\" leaves it limp); if it should move, bind a state \
+                     to one of its writable channels (e.g. position) with writable = true",
                     dev.name, dev.kind
                 ),
             );
             continue;
         }
-        // The watchdog runs the safe action of devices with a writable state. Switched off, a
-        // device is only switched on again through its `enable` channel.
+        // A trip (the watchdog's, or a fault's) latches: the device refuses setpoints until
+        // its `enable` channel is written 1.
         let Some(enable) = dev
             .channels
             .iter()
@@ -47,21 +48,21 @@ pub(super) fn check(d: &mut Diags, sub: &Subsystem, devices: &[(Range<usize>, St
         else {
             continue;
         };
-        if sub.watchdog_ns.is_some()
-            && matches!(dev.safe, SafeSpec::TorqueOff)
-            && !writable(Some(enable))
-        {
+        if !writable(Some(enable)) {
+            let by = if sub.watchdog_ns.is_some() {
+                "the command watchdog (watchdog_ms) or a fault of the device"
+            } else {
+                "a fault of the device"
+            };
             d.warning(
                 span,
                 key,
                 format!(
-                    "subsystem {:?} has a watchdog (watchdog_ms) whose safe action switches \
-                     device {:?} off (torque_off), but no writable state is bound to its \
-                     `enable` channel: after a watchdog trip nothing can switch it on again \
-                     but restarting the executor; bind one, e.g. \
+                    "device {:?} has no writable state on its `enable` channel: once tripped \
+                     by {by}, it refuses every setpoint until enabled again, and nothing but \
+                     restarting the executor could; bind one, e.g. \
                      [subsystems.{}.states.{}] device = {:?}, channel = \"enable\", \
                      writable = true",
-                    sub.name,
                     dev.name,
                     quote_key(&sub.name),
                     quote_key(&format!("{}_enable", dev.name)),

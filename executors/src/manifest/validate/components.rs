@@ -284,7 +284,10 @@ pub(super) fn device(
             cx.d.error(
                 &v.span,
                 &t.key_path("safe_value"),
-                format!("expected a velocity gain kd from 0 to 5 for damp, found {}", fmt_num(kd)),
+                format!(
+                    "expected a velocity gain kd from 0 to 5 for damp, found {}",
+                    fmt_num(kd)
+                ),
             );
             safe = None;
         }
