@@ -93,7 +93,7 @@ fn wrong_type_service_of_the_same_name() {
 
 /// A payload from a hypothetical future ABI.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
-#[type_name("conductor.StateSample.v2")]
+#[type_name("conductor.StateSample.v3")]
 #[repr(C)]
 struct FutureSample {
     seq: u64,
@@ -112,7 +112,7 @@ fn abi_version_mismatch() {
     let attrs = AttributeSpecifier::new()
         .define(
             &"conductor.abi".try_into().unwrap(),
-            &"2".try_into().unwrap(),
+            &"3".try_into().unwrap(),
         )
         .unwrap()
         .define(
@@ -130,8 +130,8 @@ fn abi_version_mismatch() {
         err,
         BusError::AbiMismatch {
             service: "conductor/leg/future".into(),
-            found: "2".into(),
-            expected: 1
+            found: "3".into(),
+            expected: 2
         }
     );
     assert!(err.to_string().contains("rebuild one side"));

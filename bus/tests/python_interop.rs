@@ -129,7 +129,7 @@ fn python_subscribes_and_commands_through_the_documented_abi() {
 
     let attrs = lines.iter().find(|l| l.contains("\"attributes\"")).unwrap();
     for kv in [
-        "\"conductor.abi\": \"1\"",
+        "\"conductor.abi\": \"2\"",
         "\"conductor.kind\": \"state\"",
         "\"conductor.index\": \"0\"",
         "\"conductor.units\": \"rad\"",

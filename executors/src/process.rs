@@ -257,7 +257,7 @@ fn stopped(tag: &str, exec: &Executor, r: &StopReport) -> u8 {
     );
     if r.unconfirmed.is_empty() {
         let what = match (r.confirmed, r.sent) {
-            (0, 0) => "no device needed a safe action".to_string(),
+            (0, 0) => "devices in their safe state (none needed a safe action)".to_string(),
             (n, 0) => format!("devices in their safe state ({n} confirmed on the wire)"),
             (0, k) => format!("devices in their safe state ({k} simulated: sent)"),
             (n, k) => format!(

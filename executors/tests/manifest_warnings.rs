@@ -1,6 +1,6 @@
 //! Warnings: a manifest with only warnings is valid and carries them in `Manifest::warnings`;
 //! they are rendered like errors, as `warning:`. A bus loaded above 80 % of its wire, an
-//! actuator nothing commands, and an actuator the watchdog switches off with no way back on.
+//! actuator nothing commands, and actuators that, once tripped, nothing could enable again.
 
 use conductor_executor::manifest::{Manifest, ManifestError, Severity};
 
@@ -23,7 +23,8 @@ fn servos(n: usize, states: &str) -> String {
 }
 
 const POSITION: &str =
-    "[subsystems.arm.states.p{i}]\ndevice = \"s{i}\"\nchannel = \"position\"\nwritable = true\n";
+    "[subsystems.arm.states.p{i}]\ndevice = \"s{i}\"\nchannel = \"position\"\nwritable = true\n\
+     [subsystems.arm.states.e{i}]\ndevice = \"s{i}\"\nchannel = \"enable\"\nwritable = true\n";
 
 const VELOCITY_CURRENT: &str =
     "[subsystems.arm.states.v{i}]\ndevice = \"s{i}\"\nchannel = \"velocity\"\n\
@@ -101,7 +102,7 @@ fn a_bus_above_100_percent_is_an_error() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/bad_manifests/24-bus-load-dynamixel.toml");
     let e = Manifest::load(&path).unwrap_err().to_string();
-    assert!(e.ends_with("1 error and 1 warning in the manifest"), "{e}");
+    assert!(e.ends_with("1 error and 2 warnings in the manifest"), "{e}");
     assert!(e.contains(": warning: subsystems.arm.devices.s10: "), "{e}");
 }
 
@@ -147,32 +148,49 @@ fn mit_leg(watchdog: &str, safe: &str, enable: bool) -> String {
     s
 }
 
-/// With a watchdog whose safe action switches a motor off, a motor without a writable state
-/// on its `enable` channel can only be switched on again by restarting the executor.
+/// A trip (the watchdog's or a fault's, whatever the safe action) leaves a device refusing
+/// setpoints until its `enable` channel is written 1: a motor without a writable state there
+/// could only be enabled again by restarting the executor.
 #[test]
-fn a_watchdog_that_switches_off_for_good_is_a_warning() {
-    let off = "safe_action = \"torque_off\"";
-    let m = parse(&mit_leg("watchdog_ms = 100", off, false));
-    assert_eq!(m.warnings.len(), 1, "{}", m.render_warnings());
-    let w = &m.warnings[0];
-    assert_eq!(w.key, "subsystems.leg.devices.knee");
-    assert!(w.message.contains("`enable` channel"), "{w}");
-    assert!(w.message.contains("restarting the executor"), "{w}");
-    assert!(
-        w.message.contains(
-            "[subsystems.leg.states.knee_enable] device = \"knee\", channel = \"enable\""
-        ),
-        "{w}"
-    );
-    // Not with an enable state, without a watchdog, or with a safe action that keeps it on
-    // (hold, the default).
-    for ok in [
-        mit_leg("watchdog_ms = 100", off, true),
-        mit_leg("", off, false),
-        mit_leg("watchdog_ms = 100", "", false),
-        mit_leg("watchdog_ms = 100", "safe_action = \"hold\"", false),
+fn an_actuator_nothing_could_enable_again_is_a_warning() {
+    for (watchdog, safe) in [
+        ("watchdog_ms = 100", "safe_action = \"torque_off\""),
+        ("watchdog_ms = 100", "safe_action = \"hold\""),
+        ("", ""),
     ] {
-        let m = parse(&ok);
-        assert!(m.warnings.is_empty(), "{ok}\n{}", m.render_warnings());
+        let m = parse(&mit_leg(watchdog, safe, false));
+        assert_eq!(m.warnings.len(), 1, "{}", m.render_warnings());
+        let w = &m.warnings[0];
+        assert_eq!(w.key, "subsystems.leg.devices.knee");
+        assert!(w.message.contains("`enable` channel"), "{w}");
+        assert!(w.message.contains("restarting the executor"), "{w}");
+        assert!(
+            w.message.contains(if watchdog.is_empty() {
+                "tripped by a fault"
+            } else {
+                "tripped by the command watchdog"
+            }),
+            "{w}"
+        );
+        assert!(
+            w.message.contains(
+                "[subsystems.leg.states.knee_enable] device = \"knee\", channel = \"enable\""
+            ),
+            "{w}"
+        );
+        // Not with an enable state.
+        let m = parse(&mit_leg(watchdog, safe, true));
+        assert!(m.warnings.is_empty(), "{}", m.render_warnings());
     }
+    // Several devices: one warning naming them all.
+    let states = "[subsystems.arm.states.p{i}]\ndevice = \"s{i}\"\nchannel = \"position\"\nwritable = true\n";
+    let m = parse(&servos(3, states));
+    assert_eq!(m.warnings.len(), 1, "{}", m.render_warnings());
+    assert!(
+        m.warnings[0]
+            .message
+            .contains("(\"s1\", \"s2\", \"s3\") have"),
+        "{}",
+        m.warnings[0]
+    );
 }

@@ -174,6 +174,8 @@ enum PlugRequest {
 struct PlugState {
     plugged: bool,
     request: Option<PlugRequest>,
+    /// A request was taken and is being carried out (the requester waits for it too).
+    busy: bool,
 }
 
 #[derive(Default)]
@@ -202,10 +204,15 @@ impl Io {
         self.t0.elapsed().as_nanos() as u64
     }
 
-    /// Carries out a pending unplug or replug request.
-    fn service(&mut self) -> Option<PlugEvent> {
+    /// Carries out a pending unplug or replug request, with what the simulator does about it
+    /// (`apply`), before the requester is told it is done.
+    fn service(&mut self, apply: impl FnOnce(PlugEvent)) {
         let mut st = lock(&self.plug.state);
-        let ev = match st.request.take()? {
+        let Some(req) = st.request.take() else {
+            return;
+        };
+        st.busy = true;
+        let ev = match req {
             PlugRequest::Unplug => {
                 // Dropping a Pty closes the master and our slave handle (the host's open
                 // slave sees the hang-up) and removes the symlink.
@@ -221,8 +228,9 @@ impl Io {
             }
         };
         drop(st);
+        apply(ev);
+        lock(&self.plug.state).busy = false;
         self.plug.changed.notify_all();
-        Some(ev)
     }
 
     /// Waits up to `timeout` (at most 50 ms) for input; returns what arrived.
@@ -446,7 +454,7 @@ impl<S> Running<S> {
         };
         st.request = Some(req);
         let deadline = Instant::now() + PLUG_WAIT;
-        while st.request.is_some() {
+        while st.request.is_some() || st.busy {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() || self.thread.as_ref().is_none_or(|t| t.is_finished()) {
                 st.request = None;
@@ -497,11 +505,13 @@ pub fn run_dxl(
         let mut queue: std::collections::VecDeque<(u64, Vec<u8>)> = Default::default();
         let mut buf = vec![0u8; 4096];
         while !stop.load(Ordering::Relaxed) {
-            if io.service() == Some(PlugEvent::Unplugged) {
-                // Replies on their way and a partial instruction die with the adapter.
-                queue.clear();
-                lock(sim).expire();
-            }
+            io.service(|ev| {
+                if ev == PlugEvent::Unplugged {
+                    // Replies on their way and a partial instruction die with the adapter.
+                    queue.clear();
+                    lock(sim).expire();
+                }
+            });
             // Write what is due; sleep precisely for a reply due within 2 ms.
             while let Some((ready, _)) = queue.front() {
                 let t = io.now();
@@ -548,9 +558,11 @@ pub fn run_slcan(ep: Endpoint, adapter: SlcanAdapterSim) -> Running<SlcanAdapter
         let mut buf = vec![0u8; 4096];
         let mut out = Vec::with_capacity(4096);
         while !stop.load(Ordering::Relaxed) {
-            if io.service() == Some(PlugEvent::Unplugged) {
-                lock(sim).unplug();
-            }
+            io.service(|ev| {
+                if ev == PlugEvent::Unplugged {
+                    lock(sim).unplug();
+                }
+            });
             let due = lock(sim).next_due();
             let now = io.now();
             let wait = due.map_or(1_000_000, |d| d.saturating_sub(now).min(1_000_000));

@@ -12,6 +12,7 @@ use super::super::Subsystem;
 
 /// Checks every device of `sub`; `devices[i]` is where device `i`'s table starts and its key.
 pub(super) fn check(d: &mut Diags, sub: &Subsystem, devices: &[(Range<usize>, String)]) {
+    let mut no_enable: Vec<(Range<usize>, String, String)> = Vec::new();
     for (i, ((span, key), dev)) in devices.iter().zip(&sub.devices).enumerate() {
         let actuator = dev
             .channels
@@ -49,26 +50,37 @@ pub(super) fn check(d: &mut Diags, sub: &Subsystem, devices: &[(Range<usize>, St
             continue;
         };
         if !writable(Some(enable)) {
-            let by = if sub.watchdog_ns.is_some() {
-                "the command watchdog (watchdog_ms) or a fault of the device"
-            } else {
-                "a fault of the device"
-            };
-            d.warning(
-                span,
-                key,
-                format!(
-                    "device {:?} has no writable state on its `enable` channel: once tripped \
-                     by {by}, it refuses every setpoint until enabled again, and nothing but \
-                     restarting the executor could; bind one, e.g. \
-                     [subsystems.{}.states.{}] device = {:?}, channel = \"enable\", \
-                     writable = true",
-                    dev.name,
-                    quote_key(&sub.name),
-                    quote_key(&format!("{}_enable", dev.name)),
-                    dev.name
-                ),
-            );
+            no_enable.push((span.clone(), key.clone(), dev.name.clone()));
         }
     }
+    // One warning for the subsystem, at its first such device.
+    let Some((span, key, first)) = no_enable.first() else {
+        return;
+    };
+    let by = if sub.watchdog_ns.is_some() {
+        "the command watchdog (watchdog_ms) or a fault"
+    } else {
+        "a fault"
+    };
+    let names: Vec<String> = no_enable.iter().map(|(_, _, n)| format!("{n:?}")).collect();
+    d.warning(
+        span,
+        key,
+        format!(
+            "{} of subsystem {:?} ({}) {} no writable state bound to the `enable` channel: \
+             once tripped by {by}, a device refuses every setpoint until enabled again, and \
+             nothing but restarting the executor could; bind one per device, e.g. \
+             [subsystems.{}.states.{}] device = {first:?}, channel = \"enable\", writable = true",
+            if names.len() == 1 {
+                "device"
+            } else {
+                "devices"
+            },
+            sub.name,
+            names.join(", "),
+            if names.len() == 1 { "has" } else { "have" },
+            quote_key(&sub.name),
+            quote_key(&format!("{first}_enable")),
+        ),
+    );
 }
