@@ -188,8 +188,9 @@ impl DeviceStatus {
 pub(crate) const PROBE_TRIES: u8 = 20;
 /// Time between probe attempts (ns): 20 tries span one second.
 pub(crate) const PROBE_SPACING_NS: u64 = 50_000_000;
-/// Attempts of any other lifecycle step before it fails.
-pub(crate) const STEP_TRIES: u8 = 3;
+/// Attempts of any other lifecycle step before it fails (a reply lost to noise, or late behind
+/// a busy USB adapter, is not a refusal).
+pub(crate) const STEP_TRIES: u8 = 10;
 /// An optional device that failed is probed again this often (ns).
 pub const REPROBE_NS: u64 = 1_000_000_000;
 

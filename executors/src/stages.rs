@@ -237,6 +237,8 @@ struct DeviceRt {
     reprobe_ns: Option<u64>,
     /// A refusal was logged since it last drove.
     refusal_logged: bool,
+    /// It has been up (driving or limp) at least once: only then can it owe a safe action.
+    ever_up: bool,
     /// Tripped by the watchdog (its states carry WATCHDOG until it is enabled again).
     watchdog: bool,
 }
@@ -383,6 +385,7 @@ impl Stages {
                 status: DeviceStatus::UNMANAGED,
                 reprobe_ns: None,
                 refusal_logged: false,
+                ever_up: false,
                 watchdog: false,
             });
         }
@@ -693,6 +696,9 @@ impl Stages {
             let st = self.devices[di].dev.status();
             let was = self.devices[di].status;
             self.devices[di].status = st;
+            if matches!(st.phase, Phase::Enabled | Phase::Holding | Phase::Disabled) {
+                self.devices[di].ever_up = true;
+            }
             if st.phase != was.phase {
                 self.event(Event::Phase {
                     device: di,
@@ -871,7 +877,12 @@ impl Stages {
     /// safe action), with why: `None` means it got no confirmation in time.
     pub fn unconfirmed(&self) -> impl Iterator<Item = (usize, Unconfirmed)> + '_ {
         self.devices.iter().enumerate().filter_map(|(i, d)| {
-            if d.safe.is_none() || !d.status.managed() || d.status.safe == SafeProgress::Confirmed {
+            // A device that never came up drives nothing: it owes no safe action.
+            if d.safe.is_none()
+                || !d.status.managed()
+                || d.status.safe == SafeProgress::Confirmed
+                || !d.ever_up
+            {
                 return None;
             }
             let why = if self.links[d.link].state != LinkState::Up {

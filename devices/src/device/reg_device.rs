@@ -593,13 +593,23 @@ impl<T: ControlTable> RegDevice<T> {
                 }
             }
             Step::Safe => {
-                if self.life.expected().iter().any(|e| e.got != e.want) {
+                if self
+                    .life
+                    .expected()
+                    .iter()
+                    .any(|e| e.want.is_some() && e.got != e.want)
+                {
                     return self.retry(now_ns);
                 }
                 let l = &mut self.life;
                 l.status.safe = SafeProgress::Confirmed;
                 if l.got(T::TORQUE) == Some(0) {
                     l.torque = Some(false);
+                    if l.status.phase == Phase::Holding {
+                        // Its torque is off (the servo's own shutdown): it is limp.
+                        l.status.phase = Phase::Disabled;
+                        l.goal = Goal::Limp;
+                    }
                 }
                 l.step = Step::None;
             }
@@ -817,8 +827,9 @@ impl<T: ControlTable> Device for RegDevice<T> {
             }
             _ => return,
         };
-        if T::FAULT_BITS != 0 && value.is_some() && !fault && self.life.status.fault != 0 {
-            // A clean status packet: the condition has passed.
+        if value.is_some() && !fault && self.life.status.fault != 0 {
+            // A clean status packet (no error bits, no alert): the condition has passed, or
+            // the hardware error was cleared by a reboot.
             self.set_fault(0, reply.t_sample_ns);
         }
         if let (Some(hw), Some(v)) = (T::HW_ERROR, value) {
@@ -875,6 +886,9 @@ impl<T: ControlTable> Device for RegDevice<T> {
                     if managed {
                         self.push_read(goal, c.len, ctx, out);
                         self.life.expect(goal, c.len, Some(value));
+                        // A servo that cut its own torque (a hardware error) holds nothing.
+                        self.push_read(T::TORQUE, 1, ctx, out);
+                        self.life.expect(T::TORQUE, 1, None);
                         if self.life.status.tripped {
                             self.life.goal = Goal::Hold;
                         }

@@ -26,6 +26,22 @@ pub(crate) fn set_nonblocking(fd: RawFd) -> io::Result<()> {
     Ok(())
 }
 
+/// Sets `FD_CLOEXEC` on `fd`: a process the executor (or a test) starts must not inherit a bus,
+/// or the bus stays open in it after we close it (a pty would never hang up).
+pub(crate) fn set_cloexec(fd: RawFd) -> io::Result<()> {
+    // SAFETY: fcntl with F_GETFD/F_SETFD only reads and writes the descriptor's flags; an
+    // invalid fd yields EBADF, which we report.
+    let flags = unsafe { libc::fcntl(fd, libc::F_GETFD) };
+    if flags < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    // SAFETY: as above.
+    if unsafe { libc::fcntl(fd, libc::F_SETFD, flags | libc::FD_CLOEXEC) } < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(())
+}
+
 /// `struct serial_struct` from `<linux/serial.h>` (libc has the ioctl numbers, not the struct).
 #[cfg(target_os = "linux")]
 #[repr(C)]

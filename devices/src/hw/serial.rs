@@ -72,6 +72,7 @@ impl SerialHardware {
         }
         let fd = port.as_raw_fd();
         fd::set_nonblocking(fd)?;
+        fd::set_cloexec(fd)?;
         let low_latency = opts.low_latency && fd::set_low_latency(fd).is_ok();
         // Whatever the adapter buffered before we opened it belongs to nobody.
         let _ = port.clear(serialport::ClearBuffer::All);

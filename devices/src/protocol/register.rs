@@ -601,12 +601,13 @@ impl Core {
         if err.failed || err.alert {
             self.counters.device_errors += 1;
         }
-        let mut first = true;
         for &(wi, w) in &x.waiters {
             if wi != ei {
                 continue;
             }
-            if (err.failed || err.alert) && first {
+            if err.failed || err.alert {
+                // Before each answer the packet carries (requests of several ticks may share
+                // it): the device flags exactly the values that came with the error.
                 let _ = out.push(Reply::answer(
                     w.cred,
                     w.op(),
@@ -616,7 +617,6 @@ impl Core {
                     w.tick,
                     t_sample,
                 ));
-                first = false;
             }
             let data = if err.failed {
                 ReplyData::Missing { op: w.op() }

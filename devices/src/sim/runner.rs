@@ -24,6 +24,7 @@ use serialport::{SerialPort, TTYPort};
 use super::dxl::{DxlBusSim, DxlSimConfig};
 use super::fault::{FaultConfig, FaultInjector, FaultTotals};
 use super::slcan_adapter::SlcanAdapterSim;
+use crate::hw::fd;
 
 /// A pseudo-terminal whose slave side the host opens.
 pub struct Pty {
@@ -51,7 +52,11 @@ impl Pty {
         let path = slave
             .name()
             .ok_or_else(|| io::Error::other("pty without a name"))?;
-        set_nonblocking(master.as_raw_fd())?;
+        fd::set_nonblocking(master.as_raw_fd())?;
+        // A process the test starts (an executor) must not hold our end open: it would never
+        // see the hang-up of an unplug.
+        fd::set_cloexec(master.as_raw_fd())?;
+        fd::set_cloexec(slave.as_raw_fd())?;
         if let Some(l) = link {
             match std::fs::remove_file(l) {
                 Ok(()) => {}
@@ -117,49 +122,6 @@ impl Endpoint {
             Endpoint::Pty(p) => p.master.as_raw_fd(),
             Endpoint::Udp(s) => s.as_raw_fd(),
         }
-    }
-}
-
-/// Sets `O_NONBLOCK` on `fd`.
-fn set_nonblocking(fd: RawFd) -> io::Result<()> {
-    // SAFETY: fcntl with F_GETFL/F_SETFL only reads and writes the descriptor's flags; an
-    // invalid fd yields EBADF, which we report.
-    let flags = unsafe { libc::fcntl(fd, libc::F_GETFL) };
-    if flags < 0 {
-        return Err(io::Error::last_os_error());
-    }
-    // SAFETY: as above.
-    if unsafe { libc::fcntl(fd, libc::F_SETFL, flags | libc::O_NONBLOCK) } < 0 {
-        return Err(io::Error::last_os_error());
-    }
-    Ok(())
-}
-
-/// `read(2)` on a non-blocking fd: 0 when nothing is there.
-fn read_nb(fd: RawFd, buf: &mut [u8]) -> io::Result<usize> {
-    // SAFETY: buf is valid for buf.len() bytes of writes.
-    let n = unsafe { libc::read(fd, buf.as_mut_ptr().cast(), buf.len()) };
-    if n >= 0 {
-        return Ok(n as usize);
-    }
-    let e = io::Error::last_os_error();
-    match e.kind() {
-        io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted => Ok(0),
-        _ => Err(e),
-    }
-}
-
-/// `write(2)` on a non-blocking fd: 0 when it would block.
-fn write_nb(fd: RawFd, data: &[u8]) -> io::Result<usize> {
-    // SAFETY: data is valid for data.len() bytes of reads.
-    let n = unsafe { libc::write(fd, data.as_ptr().cast(), data.len()) };
-    if n >= 0 {
-        return Ok(n as usize);
-    }
-    let e = io::Error::last_os_error();
-    match e.kind() {
-        io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted => Ok(0),
-        _ => Err(e),
     }
 }
 
@@ -256,7 +218,7 @@ impl Io {
             return 0;
         }
         match ep {
-            Endpoint::Pty(p) => read_nb(p.master.as_raw_fd(), buf).unwrap_or(0),
+            Endpoint::Pty(p) => fd::read_nb(p.master.as_raw_fd(), buf).unwrap_or(0),
             Endpoint::Udp(s) => match s.recv_from(buf) {
                 Ok((n, from)) => {
                     self.peer = Some(from);
@@ -274,7 +236,7 @@ impl Io {
                 let mut rest = data;
                 let deadline = Instant::now() + Duration::from_secs(1);
                 while !rest.is_empty() && Instant::now() < deadline {
-                    match write_nb(p.master.as_raw_fd(), rest) {
+                    match fd::write_nb(p.master.as_raw_fd(), rest) {
                         Ok(0) => std::thread::sleep(Duration::from_micros(100)),
                         Ok(n) => rest = &rest[n..],
                         Err(_) => return,

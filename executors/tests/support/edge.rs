@@ -114,9 +114,18 @@ impl Exec {
 
     /// Waits until a stderr line contains `text`.
     pub fn wait_log(&self, secs: u64, text: &str) -> String {
-        super::eventually(secs, &format!("log line with {text:?}"), || {
-            self.log().into_iter().find(|l| l.contains(text))
-        })
+        let end = Instant::now() + Duration::from_secs(secs);
+        loop {
+            if let Some(l) = self.log().into_iter().find(|l| l.contains(text)) {
+                return l;
+            }
+            assert!(
+                Instant::now() < end,
+                "no log line with {text:?} within {secs} s: {:#?}",
+                self.log()
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
     }
 }
 

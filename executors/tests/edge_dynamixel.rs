@@ -1,0 +1,387 @@
+//! The hardware edge on a Dynamixel bus, end to end: `conductor-executor` against the bus
+//! simulator on a pseudo-terminal, whose X-series servos behave as the e-Manual says (torque
+//! off at power-on, EEPROM refused with torque on, hardware errors latched until a reboot).
+//!
+//! Bring-up errors name the bus, the id, the expected and the found model; a configuration the
+//! servo refuses is an error; EEPROM is written with torque off; a hardware error becomes fault
+//! flags and a trip; a tripped servo refuses setpoints until enabled again, from where it is; a
+//! vanished port is reopened and the servos resume without a restart.
+
+mod support;
+
+use std::time::{Duration, Instant};
+
+use conductor_bus::{status, Bus, Controller, Domain, StatsSubscriber};
+use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
+use conductor_devices::sim::fault::FaultConfig;
+use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty, Running};
+use support::edge::{send, Exec, Watch};
+use support::{eventually, temp_manifest};
+
+const PULSE: f64 = 2.0 * std::f64::consts::PI / 4096.0;
+
+/// A bus of servos `ids` on a pty (with a symlink, so it can be unplugged and plugged back).
+fn bus(tag: &str, cfg: DxlSimConfig) -> (Running<DxlBusSim>, String) {
+    let link = std::env::temp_dir().join(format!("conductor-edge-{tag}-{}", std::process::id()));
+    let sim = run_dxl(
+        Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
+        cfg,
+        FaultConfig::default(),
+        FaultConfig::default(),
+    );
+    sim.sim().start_log();
+    (sim, link.display().to_string())
+}
+
+fn ids(n: u8) -> DxlSimConfig {
+    DxlSimConfig {
+        ids: (1..=n).collect(),
+        ..DxlSimConfig::default()
+    }
+}
+
+/// A manifest: servos 1..=`n` (`extra` added to each device table), a position and an enable
+/// state per servo, at 200 Hz.
+fn manifest(port: &str, n: u8, top: &str, extra: &str) -> String {
+    let mut s = format!(
+        "system = \"edge\"\n[subsystems.arm]\nrate_hz = 200\n{top}\n\
+         [subsystems.arm.hardware.uart]\nkind = \"serial\"\nport = \"{port}\"\n\
+         [subsystems.arm.protocols.robotis]\nkind = \"dynamixel2\"\nhardware = \"uart\"\n\
+         timeout_us = 10000\n"
+    );
+    for i in 1..=n {
+        s += &format!(
+            "[subsystems.arm.devices.j{i}]\nkind = \"dynamixel_x\"\nprotocol = \"robotis\"\nid = {i}\n{extra}\n\
+             [subsystems.arm.states.p{i}]\ndevice = \"j{i}\"\nchannel = \"position\"\nwritable = true\nmin = -1\nmax = 1\n\
+             [subsystems.arm.states.e{i}]\ndevice = \"j{i}\"\nchannel = \"enable\"\nwritable = true\nmin = 0\nmax = 1\n"
+        );
+    }
+    s
+}
+
+fn start(
+    tag: &str,
+    text: &str,
+) -> (
+    Result<Exec, (std::process::ExitStatus, Vec<String>)>,
+    Domain,
+) {
+    let d = Domain::unique(tag).unwrap();
+    let path = temp_manifest(tag, text);
+    (Exec::start(&path, "arm", &d), d)
+}
+
+#[test]
+fn a_wrong_model_stops_the_executor_naming_bus_id_expected_and_found() {
+    let (sim, port) = bus("model", ids(3));
+    sim.sim().servo_mut(3).unwrap().set_model(1130);
+    let (r, _d) = start("model", &manifest(&port, 3, "", ""));
+    let (status, log) = r.err().expect("the executor must not run");
+    assert_eq!(status.code(), Some(2), "{log:#?}");
+    let line = log
+        .iter()
+        .find(|l| l.contains("error:") && l.contains("\"j3\""))
+        .unwrap_or_else(|| panic!("{log:#?}"));
+    for part in [
+        "id 3 on bus \"uart\"",
+        "answered as model 1130 (xm540-w150)",
+        "expects xm430-w350 (1020)",
+    ] {
+        assert!(line.contains(part), "{part:?} in {line}");
+    }
+    // The servos that did come up were put back in their safe state before it exited.
+    assert!(log.iter().any(|l| l.contains("not running")), "{log:#?}");
+}
+
+#[test]
+fn a_missing_servo_is_an_error_unless_optional() {
+    let (sim, port) = bus("missing", ids(2));
+    let (r, _d) = start("missing", &manifest(&port, 3, "", ""));
+    let (status, log) = r.err().expect("servo 3 is not on the bus");
+    assert_eq!(status.code(), Some(2));
+    assert!(
+        log.iter()
+            .any(|l| l.contains("\"j3\"") && l.contains("id 3") && l.contains("does not answer")),
+        "{log:#?}"
+    );
+    // Optional: a warning, the others run, its states stay STALE (never a value).
+    let text = manifest(&port, 2, "", "")
+        + "[subsystems.arm.devices.j3]\nkind = \"dynamixel_x\"\nprotocol = \"robotis\"\nid = 3\noptional = true\n\
+           [subsystems.arm.states.p3]\ndevice = \"j3\"\nchannel = \"position\"\n\
+           [subsystems.arm.states.e3]\ndevice = \"j3\"\nchannel = \"enable\"\nwritable = true\n";
+    let (r, d) = start("optional", &text);
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let w = exec.wait_log(2, "warning: optional");
+    assert!(w.contains("\"j3\"") && w.contains("STALE"), "{w}");
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut p1 = Watch::new(&bus, "arm/p1");
+    let mut p3 = Watch::new(&bus, "arm/p3");
+    p1.until(2.0, "p1 published", |s| s.status & status::STALE == 0);
+    std::thread::sleep(Duration::from_millis(200));
+    assert!(
+        p3.poll().is_none(),
+        "no value is ever invented for an absent servo"
+    );
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+    drop(sim);
+}
+
+#[test]
+fn a_configuration_the_servo_refuses_is_an_error() {
+    // Operating Mode 2 does not exist on an XM430: the servo answers Data Range Error and
+    // keeps 3; the read-back says so.
+    let (_sim, port) = bus("config", ids(1));
+    let (r, _d) = start("config", &manifest(&port, 1, "", "operating_mode = 2"));
+    let (status, log) = r.err().expect("refused configuration");
+    assert_eq!(status.code(), Some(2));
+    assert!(
+        log.iter().any(|l| l.contains("\"j1\"")
+            && l.contains("refused its configuration: register 11 reads 3 after writing 2")),
+        "{log:#?}"
+    );
+}
+
+#[test]
+fn eeprom_is_written_with_torque_off_and_read_back_then_enabled_where_it_is() {
+    // Servos still powered from a previous run: torque on, Return Delay Time 250 (500 µs),
+    // resting off centre. The manifest wants return delay 0.
+    let cfg = DxlSimConfig {
+        torque_on: true,
+        return_delay_us: 500,
+        initial_position: 2300,
+        ..ids(2)
+    };
+    let (sim, port) = bus("eeprom", cfg);
+    let (r, _d) = start("eeprom", &manifest(&port, 2, "", "return_delay_us = 0"));
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    {
+        let s = sim.sim();
+        let log = s.instruction_log();
+        for id in 1..=2u8 {
+            let mine: Vec<_> = log.iter().filter(|r| r.1 == id).collect();
+            let at = |addr: u16, data: &[u8]| mine.iter().position(|r| r.3 == addr && r.4 == data);
+            let off = at(64, &[0]).unwrap_or_else(|| panic!("torque off: {mine:?}"));
+            let delay = at(9, &[0]).unwrap_or_else(|| panic!("return delay: {mine:?}"));
+            let goal = at(116, &2300i32.to_le_bytes()).unwrap_or_else(|| panic!("goal: {mine:?}"));
+            let on = mine
+                .iter()
+                .rposition(|r| r.3 == 64 && r.4 == [1])
+                .unwrap_or_else(|| panic!("torque on: {mine:?}"));
+            assert!(
+                off < delay && delay < goal && goal < on,
+                "servo {id}: {mine:?}"
+            );
+            let servo = s.servo(id).unwrap();
+            assert_eq!(servo.table[9], 0, "written and kept");
+            assert!(servo.torque_on());
+            assert_eq!(servo.present_position(), 2300, "enabled where it was");
+        }
+    }
+    assert!(exec.stop().success());
+}
+
+#[test]
+fn a_hardware_error_trips_the_servo_and_enable_reboots_it() {
+    let (sim, port) = bus("fault", ids(2));
+    let (r, d) = start("fault", &manifest(&port, 2, "", ""));
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p2 = Watch::new(&bus, "arm/p2");
+    let mut e2 = Watch::new(&bus, "arm/e2");
+    send(&mut ctl, &[("arm/p2", 0.3)]);
+    p2.until(2.0, "p2 moved", |s| (s.value - 0.3).abs() < 4.0 * PULSE);
+
+    // Overload: the servo cuts its torque and raises the alert bit in every status packet.
+    sim.sim().servo_mut(2).unwrap().inject_hardware_error(0x20);
+    // Tripped, flagged, and shown limp: the servo cut its own torque (the hold found it off).
+    p2.until(2.0, "fault flags", |s| {
+        let all = status::DEVICE_FAULT | status::TRIPPED | status::DISABLED;
+        s.status & all == all
+    });
+    exec.wait_log(2, "reports a fault: 0x20");
+    exec.wait_log(2, "tripped by its fault");
+    // Refused, loudly: REJECTED on the state, counted.
+    send(&mut ctl, &[("arm/p2", -0.3)]);
+    p2.until(1.0, "refused", |s| s.status & status::REJECTED != 0);
+    let mut stats = StatsSubscriber::new(&bus, "arm").unwrap();
+    let st = eventually(2, "stats", || {
+        stats
+            .latest()
+            .unwrap()
+            .filter(|s| s.setpoints_refused > 0 && s.device_faults > 0)
+    });
+    assert_eq!((st.devices_tripped, st.devices_faulted), (1, 1), "{st:?}");
+    assert_eq!(
+        exec.log()
+            .iter()
+            .filter(|l| l.contains("reports a fault"))
+            .count(),
+        1,
+        "one line per transition, not per packet"
+    );
+    let goal = sim.sim().servo(2).unwrap().goal_position();
+    assert!(
+        (goal - (2048 + 196)).abs() <= 6,
+        "the refused setpoint never reached it: {goal}"
+    );
+
+    // Enable: only a REBOOT clears a latched hardware error; then it is brought up again and
+    // enabled where it is.
+    send(&mut ctl, &[("arm/e2", 1.0)]);
+    e2.until(3.0, "enabled again", |s| s.value == 1.0);
+    let s = p2.until(1.0, "flags clear", |s| {
+        s.status & (status::DEVICE_FAULT | status::TRIPPED | status::DISABLED) == 0
+    });
+    assert_eq!(sim.sim().stats().reboot, 1);
+    let servo = sim.sim().servo(2).unwrap().clone();
+    assert_eq!(servo.hardware_error(), 0);
+    assert!(servo.torque_on());
+    assert_eq!(
+        servo.goal_position(),
+        servo.present_position(),
+        "enabled where it is"
+    );
+    assert!(
+        (s.value - 0.3).abs() < 4.0 * PULSE,
+        "it stayed where it was: {s:?}"
+    );
+    send(&mut ctl, &[("arm/p2", -0.3)]);
+    p2.until(2.0, "commands again", |s| {
+        (s.value + 0.3).abs() < 4.0 * PULSE
+    });
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+}
+
+#[test]
+fn reboot_on_fault_recovers_by_itself() {
+    let (sim, port) = bus("reboot", ids(1));
+    let (r, d) = start("reboot", &manifest(&port, 1, "", "reboot_on_fault = true"));
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut p1 = Watch::new(&bus, "arm/p1");
+    p1.until(2.0, "up", |s| s.status & status::DISABLED == 0);
+    sim.sim().servo_mut(1).unwrap().inject_hardware_error(0x04);
+    p1.until(2.0, "tripped", |s| s.status & status::TRIPPED != 0);
+    // The first reboot waits 1 s.
+    let t = Instant::now();
+    p1.until(4.0, "recovered", |s| {
+        s.status & (status::TRIPPED | status::DISABLED | status::DEVICE_FAULT) == 0
+    });
+    assert!(
+        t.elapsed() >= Duration::from_millis(800),
+        "{:?}",
+        t.elapsed()
+    );
+    assert_eq!(sim.sim().stats().reboot, 1);
+    assert!(exec.stop().success());
+}
+
+#[test]
+fn the_watchdog_trips_setpoints_are_refused_until_enable_from_where_it_is() {
+    let (sim, port) = bus("watchdog", ids(1));
+    let (r, d) = start("watchdog", &manifest(&port, 1, "watchdog_ms = 150", ""));
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "arm/p1");
+    // Frames faster than the watchdog while it moves.
+    let t = Instant::now();
+    while p1
+        .poll()
+        .is_none_or(|s| (s.value - 0.5).abs() >= 4.0 * PULSE)
+    {
+        assert!(t.elapsed() < Duration::from_secs(2), "{:?}", p1.last);
+        send(&mut ctl, &[("arm/p1", 0.5)]);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Silence: the watchdog holds it where it is and trips it.
+    let s = p1.until(2.0, "tripped", |s| {
+        s.status & (status::WATCHDOG | status::TRIPPED) == status::WATCHDOG | status::TRIPPED
+    });
+    assert_eq!(s.status & status::DISABLED, 0, "hold keeps torque on");
+    exec.wait_log(2, "tripped by the command watchdog");
+    // A frame does not clear the trip: its setpoint is refused, and says why.
+    send(&mut ctl, &[("arm/p1", -0.5)]);
+    p1.until(1.0, "refused", |s| s.status & status::REJECTED != 0);
+    exec.wait_log(
+        2,
+        "setpoint for \"p1\" refused: its device is holding, tripped",
+    );
+    std::thread::sleep(Duration::from_millis(100));
+    let goal = sim.sim().servo(1).unwrap().goal_position();
+    assert!(
+        (goal - (2048 + 326)).abs() <= 2,
+        "still where it held: {goal}"
+    );
+    // enable = 1: enabled again, from where it is.
+    send(&mut ctl, &[("arm/e1", 1.0)]);
+    p1.until(2.0, "enabled", |s| {
+        s.status & (status::TRIPPED | status::WATCHDOG) == 0
+    });
+    // Frames faster than the watchdog again.
+    let t = Instant::now();
+    while p1
+        .poll()
+        .is_none_or(|s| (s.value + 0.5).abs() >= 4.0 * PULSE)
+    {
+        assert!(
+            t.elapsed() < Duration::from_secs(2),
+            "obeys again: {:?}",
+            p1.last
+        );
+        send(&mut ctl, &[("arm/p1", -0.5)]);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    assert!(exec.stop().success());
+}
+
+#[test]
+fn an_unplugged_port_is_reopened_and_the_servos_resume_without_a_restart() {
+    let (sim, port) = bus("unplug", ids(2));
+    let (r, d) = start("unplug", &manifest(&port, 2, "", ""));
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "arm/p1");
+    send(&mut ctl, &[("arm/p1", 0.25), ("arm/p2", -0.25)]);
+    p1.until(2.0, "moved", |s| (s.value - 0.25).abs() < 4.0 * PULSE);
+
+    // USB unplug of the adapter (the servos stay powered and keep their state).
+    p1.poll();
+    let before = p1.all.len();
+    sim.unplug();
+    p1.until(1.0, "stale", |s| s.status & status::STALE != 0);
+    exec.wait_log(2, "vanished");
+    // Setpoints meanwhile are refused, not queued for later.
+    send(&mut ctl, &[("arm/p1", -0.75)]);
+    p1.until(1.0, "refused", |s| s.status & status::REJECTED != 0);
+    std::thread::sleep(Duration::from_millis(500));
+
+    sim.replug().unwrap();
+    let back = Instant::now();
+    let s = p1.until(3.0, "fresh again", |s| {
+        s.status & (status::STALE | status::DISABLED) == 0
+    });
+    let took = back.elapsed();
+    assert!(
+        took < Duration::from_secs(1),
+        "resumed {took:?} after the port came back"
+    );
+    assert!((s.value - 0.25).abs() < 4.0 * PULSE, "where it was: {s:?}");
+    exec.wait_log(2, "is back after");
+    // No wrong value since the unplug: every sample is the servo's position or flagged STALE.
+    p1.poll();
+    for s in &p1.all[before..] {
+        let good = (s.value - 0.25).abs() < 4.0 * PULSE;
+        assert!(good || s.status & status::STALE != 0, "{s:?}");
+    }
+    let mut stats = StatsSubscriber::new(&bus, "arm").unwrap();
+    let st = eventually(2, "stats", || {
+        stats.latest().unwrap().filter(|s| s.bus_outages > 0)
+    });
+    assert_eq!((st.bus_outages, st.links_down), (1, 0), "{st:?}");
+    send(&mut ctl, &[("arm/p1", -0.25)]);
+    p1.until(2.0, "obeys again", |s| (s.value + 0.25).abs() < 4.0 * PULSE);
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+}
