@@ -191,6 +191,9 @@ pub(crate) const PROBE_SPACING_NS: u64 = 50_000_000;
 /// Attempts of any other lifecycle step before it fails (a reply lost to noise, or late behind
 /// a busy USB adapter, is not a refusal).
 pub(crate) const STEP_TRIES: u8 = 10;
+/// A safe action not yet confirmed is sent again this often (ns), until it is confirmed or
+/// the executor stops waiting.
+pub(crate) const SAFE_RETRY_NS: u64 = 20_000_000;
 /// An optional device that failed is probed again this often (ns).
 pub const REPROBE_NS: u64 = 1_000_000_000;
 

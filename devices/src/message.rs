@@ -149,6 +149,13 @@ pub enum ReplyData {
         /// Protocol-specific error code.
         code: u32,
     },
+    /// The answer to `op` came after its deadline (it was already reported `Missing`): its
+    /// value's time is unknown, so it carries none, but it proves the device got the request
+    /// (a safe action's confirmation).
+    Late {
+        /// The request it answers.
+        op: Op,
+    },
     /// No (valid) answer arrived for this request before its deadline.
     Missing {
         /// The request that went unanswered.

@@ -80,21 +80,19 @@ impl Outstanding {
     }
 
     /// A reply nobody pending can take: if it answers a request that expired (or one not yet
-    /// on the bus when it arrived, i.e. an earlier one that expired), it is late. Consumes the
-    /// oldest such expired request; returns whether the reply was late.
-    pub fn resolve_late(&mut self, cred: Credential, matches: impl Fn(&Op) -> bool) -> bool {
+    /// on the bus when it arrived, i.e. an earlier one that expired), it is late. Consumes and
+    /// returns the oldest such expired request.
+    pub fn resolve_late(
+        &mut self,
+        cred: Credential,
+        matches: impl Fn(&Op) -> bool,
+    ) -> Option<Pending> {
         let i = self
             .expired
             .as_slice()
             .iter()
-            .position(|p| p.cred == cred && matches(&p.op));
-        match i {
-            Some(i) => {
-                self.expired.remove(i);
-                true
-            }
-            None => false,
-        }
+            .position(|p| p.cred == cred && matches(&p.op))?;
+        Some(self.expired.remove(i))
     }
 
     /// Forgets the requests whose words lie at or after stream position `from` (never sent);
@@ -195,8 +193,11 @@ mod tests {
         assert!(o.is_empty());
         assert!(o.resolve(Credential::id(3), u64::MAX, |_| true).is_none());
         // The expired ones make their late replies recognisable, once each.
-        assert!(o.resolve_late(Credential::id(2), |_| true));
-        assert!(!o.resolve_late(Credential::id(2), |_| true));
+        assert_eq!(
+            o.resolve_late(Credential::id(2), |_| true).map(|p| p.tick),
+            Some(1)
+        );
+        assert!(o.resolve_late(Credential::id(2), |_| true).is_none());
     }
 
     /// A reply is never matched to a request that was not on the bus before it arrived.

@@ -20,7 +20,8 @@
 //! (8-byte replies of newer firmware) trips it.
 
 use crate::lifecycle::{
-    DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES, STEP_TRIES,
+    DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES,
+    SAFE_RETRY_NS, STEP_TRIES,
 };
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
@@ -91,8 +92,10 @@ enum Step {
 pub struct MitMotor {
     cred: Credential,
     target: Target,
-    /// Gains from the manifest, used when enabling.
+    /// Gains in use (the manifest's until the kp/kd channels are written).
     gains: (f32, f32),
+    /// The manifest's gains: enabling (again) holds with these, whatever was written before.
+    configured: (f32, f32),
     dirty: bool,
     /// Bit per channel ever sampled: every reply (and report) updates them.
     sampled: u8,
@@ -134,6 +137,7 @@ impl MitMotor {
                 ..Target::default()
             },
             gains: (kp, kd),
+            configured: (kp, kd),
             dirty: false,
             sampled: 0,
             special: None,
@@ -185,8 +189,10 @@ impl MitMotor {
         }
     }
 
-    /// Holding `p` with the configured gains: what enabling sends.
+    /// Holding `p` with the manifest's gains: what enabling (and a hold) sends; gains a
+    /// controller wrote before are not kept (they may be none at all).
     fn hold_at(&mut self, p: f32) -> Op {
+        self.gains = self.configured;
         self.target = Target {
             p,
             v: 0.0,
@@ -248,9 +254,11 @@ impl MitMotor {
     }
 
     fn retry(&mut self, now_ns: u64) {
-        self.tries += 1;
+        self.tries = self.tries.saturating_add(1);
         let (limit, spacing) = match self.step {
             Step::Probe => (PROBE_TRIES, PROBE_SPACING_NS),
+            // A safe action is sent again until it is confirmed; the executor bounds the wait.
+            Step::Safe => (u8::MAX, SAFE_RETRY_NS),
             _ => (STEP_TRIES, 0),
         };
         if self.tries < limit {
@@ -325,6 +333,8 @@ impl MitMotor {
         }
         match reply.data {
             ReplyData::Mit { .. } => self.step_done(),
+            // Late: it did get the frame (a lagging adapter); enough to confirm a safe action.
+            ReplyData::Late { .. } if self.step == Step::Safe => self.step_done(),
             ReplyData::Missing { .. } => self.retry(reply.t_sample_ns),
             _ => {}
         }
@@ -484,6 +494,11 @@ impl Device for MitMotor {
                 Some([p as f64, v as f64, t as f64])
             }
             ReplyData::Missing { .. } => None,
+            ReplyData::Late { .. } => {
+                // No value (its time is unknown); it may still confirm a safe action.
+                self.life_reply(reply);
+                return;
+            }
             ReplyData::DeviceError { code } => {
                 self.faults += 1;
                 self.fault_tick = Some(reply.tick);

@@ -331,9 +331,10 @@ impl OdriveAxis {
 
     /// The axis is not there yet: ask again next tick, up to a bound.
     fn poll_again(&mut self) {
-        self.tries += 1;
+        self.tries = self.tries.saturating_add(1);
         self.sent = false;
-        if self.tries >= CONFIRM_POLLS {
+        // A safe action is watched until it shows; the executor bounds the wait.
+        if self.tries >= CONFIRM_POLLS && self.step != Step::Safe {
             match self.step {
                 Step::Enable => {
                     self.status.failure = Some(Failure::EnableRefused);

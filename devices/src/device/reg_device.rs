@@ -23,7 +23,7 @@
 use super::register::{ConfigItem, ControlTable, RegChannel};
 use crate::lifecycle::{
     Backoff, DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES,
-    STEP_TRIES,
+    SAFE_RETRY_NS, STEP_TRIES,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
@@ -431,9 +431,11 @@ impl<T: ControlTable> RegDevice<T> {
     /// A lifecycle request went unanswered (or was refused): retry, or give up.
     fn retry(&mut self, now_ns: u64) {
         let l = &mut self.life;
-        l.tries += 1;
+        l.tries = l.tries.saturating_add(1);
         let (limit, spacing) = match l.step {
             Step::Probe => (PROBE_TRIES, PROBE_SPACING_NS),
+            // A safe action is sent again until it is confirmed; the executor bounds the wait.
+            Step::Safe => (u8::MAX, SAFE_RETRY_NS),
             _ => (STEP_TRIES, 0),
         };
         if l.tries < limit {

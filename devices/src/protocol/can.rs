@@ -177,9 +177,11 @@ impl CanMotorProtocol {
                 }
                 return;
             }
-            if self.pending.resolve_late(cred, is_mit) {
-                // The answer to a request already reported missing: its time is unknown.
+            if let Some(p) = self.pending.resolve_late(cred, is_mit) {
+                // The answer to a request already reported missing: its time is unknown, so it
+                // carries no value; it still proves the motor got the request.
                 self.counters.late_replies += 1;
+                let _ = out.push(p.reply(ReplyData::Late { op: p.op }));
                 return;
             }
         }
@@ -189,9 +191,12 @@ impl CanMotorProtocol {
                 let cmd = msg.cmd_id();
                 let same = |op: &Op| matches!(op, Op::Odrive(m) if m.cmd_id() == cmd);
                 let asked = self.pending.resolve(cred, fence, same);
-                if asked.is_none() && self.pending.resolve_late(cred, same) {
-                    self.counters.late_replies += 1;
-                    return;
+                if asked.is_none() {
+                    if let Some(p) = self.pending.resolve_late(cred, same) {
+                        self.counters.late_replies += 1;
+                        let _ = out.push(p.reply(ReplyData::Late { op: p.op }));
+                        return;
+                    }
                 }
                 self.counters.packets_in += 1;
                 // Cyclic messages (heartbeat, encoder estimates) arrive unasked: they are

@@ -1,0 +1,440 @@
+//! The hardware edge on CAN, end to end: `conductor-executor` against the SLCAN adapter
+//! simulator on a pseudo-terminal with MIT-mode motors (Katz firmware behaviour: commands are
+//! ignored until the enter-motor-mode frame, which starts with no torque) and an ODrive axis
+//! (idle until asked for closed loop) behind it.
+//!
+//! A stop through an adapter that lags is confirmed on the wire before the executor exits; a
+//! tripped motor refuses setpoints and is enabled again from where it is, not towards a command
+//! from before the trip; a motor fault trips it; garbage lines publish nothing; after the
+//! adapter stalls, every sample keeps its true sample time; an adapter that never acknowledges
+//! frames keeps one frame per motor per tick; the adapter unplugged and plugged back resumes.
+
+mod support;
+
+use std::time::{Duration, Instant};
+
+use conductor_bus::{status, Bus, Controller, Domain, StateSample, StatsSubscriber};
+use conductor_devices::protocol::mit_limits;
+use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
+use conductor_devices::sim::runner::{run_slcan, Endpoint, Pty, Running};
+use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
+use conductor_protocols::slcan::Dialect;
+use embedded_can::Frame;
+use support::edge::{send, Exec, Watch};
+use support::{eventually, temp_manifest};
+
+/// An adapter with MIT motors `mit` (8-byte replies with `long`) and ODrive axes `odrive`.
+fn adapter(tag: &str, mit: &[u8], long: bool, odrive: &[u8]) -> (Running<SlcanAdapterSim>, String) {
+    let link = std::env::temp_dir().join(format!("conductor-edge-{tag}-{}", std::process::id()));
+    let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
+    for &id in mit {
+        nodes.push(Box::new(MitMotorSim::new(
+            id,
+            mit_limits("ak80-9").unwrap(),
+            0,
+            long,
+        )));
+    }
+    for &n in odrive {
+        nodes.push(Box::new(OdriveAxisSim::new(n, 100, 0)));
+    }
+    let sim = run_slcan(
+        Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
+        SlcanAdapterSim::new(Dialect::CANABLE, nodes).with_log(),
+    );
+    (sim, link.display().to_string())
+}
+
+/// A manifest for MIT motors 1..=`n` at 500 Hz: per motor, position (and, with `gains`,
+/// velocity, torque, kp, kd) writable, and its enable state.
+fn manifest(port: &str, n: u8, top: &str, gains: bool) -> String {
+    let mut s = format!(
+        "system = \"edge\"\n[subsystems.leg]\nrate_hz = 500\n{top}\n\
+         [subsystems.leg.hardware.can0]\nkind = \"slcan\"\nport = \"{port}\"\n\
+         [subsystems.leg.protocols.mit]\nkind = \"can_motors\"\nhardware = \"can0\"\ntimeout_us = 1500\n"
+    );
+    for i in 1..=n {
+        s += &format!(
+            "[subsystems.leg.devices.m{i}]\nkind = \"mit_motor\"\nprotocol = \"mit\"\nid = {i}\nkp = 20.0\nkd = 1.0\n\
+             [subsystems.leg.states.p{i}]\ndevice = \"m{i}\"\nchannel = \"position\"\nwritable = true\nmin = -3\nmax = 3\n\
+             [subsystems.leg.states.e{i}]\ndevice = \"m{i}\"\nchannel = \"enable\"\nwritable = true\nmin = 0\nmax = 1\n"
+        );
+        if gains {
+            for ch in ["velocity", "torque", "kp", "kd"] {
+                s += &format!(
+                    "[subsystems.leg.states.{ch}{i}]\ndevice = \"m{i}\"\nchannel = \"{ch}\"\nwritable = true\n"
+                );
+            }
+        }
+    }
+    s
+}
+
+fn start(tag: &str, text: &str) -> (Exec, Domain) {
+    let d = Domain::unique(tag).unwrap();
+    let path = temp_manifest(tag, text);
+    let exec = Exec::start(&path, "leg", &d).unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    (exec, d)
+}
+
+/// The MIT data of an exit-motor-mode frame.
+const EXIT: [u8; 8] = [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFD];
+
+fn node(
+    sim: &Running<SlcanAdapterSim>,
+    i: usize,
+) -> conductor_devices::sim::can_motors::NodeSnapshot {
+    sim.sim().nodes()[i].snapshot()
+}
+
+#[test]
+fn a_stop_through_a_lagging_adapter_is_confirmed_on_the_wire() {
+    let (sim, port) = adapter("lag", &[1, 2, 3], false, &[]);
+    let (mut exec, d) = start("lag", &manifest(&port, 3, "", false));
+    for i in 0..3 {
+        assert!(node(&sim, i).enabled, "motor {} in motor mode", i + 1);
+        assert_eq!(node(&sim, i).ignored, 0, "no command before enter");
+    }
+    // The adapter falls behind: acknowledgements and answers come 60 ms late, frames queue up.
+    sim.sim().set_latency(60_000_000);
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let end = Instant::now() + Duration::from_millis(500);
+    while Instant::now() < end {
+        send(
+            &mut ctl,
+            &[("leg/p1", 0.2), ("leg/p2", -0.2), ("leg/p3", 0.1)],
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let status = exec.stop();
+    assert!(status.success(), "{status}: {:#?}", exec.log());
+    assert!(
+        exec.log()
+            .iter()
+            .any(|l| l.contains("devices in their safe state (3 confirmed on the wire)")),
+        "{:#?}",
+        exec.log()
+    );
+    std::thread::sleep(Duration::from_millis(100));
+    for i in 0..3 {
+        assert!(!node(&sim, i).enabled, "motor {} out of motor mode", i + 1);
+    }
+    // On the wire: after each motor's exit frame, nothing more for it from the host.
+    let s = sim.sim();
+    for id in 1..=3u16 {
+        let to_it: Vec<&[u8]> = s
+            .log()
+            .iter()
+            .filter(|(host, f)| {
+                *host
+                    && f.id()
+                        == embedded_can::Id::Standard(embedded_can::StandardId::new(id).unwrap())
+            })
+            .map(|(_, f)| f.data())
+            .collect();
+        let last_exit = to_it
+            .iter()
+            .rposition(|d| *d == EXIT)
+            .expect("an exit frame");
+        assert_eq!(
+            last_exit,
+            to_it.len() - 1,
+            "motor {id}: frames after its exit frame"
+        );
+    }
+}
+
+#[test]
+fn a_tripped_motor_refuses_setpoints_and_is_enabled_again_from_where_it_is() {
+    let (sim, port) = adapter("reenable", &[1], false, &[]);
+    let (mut exec, d) = start("reenable", &manifest(&port, 1, "watchdog_ms = 200", true));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "leg/p1");
+    // A command that keeps pushing: no stiffness, no damping, 0.05 N·m feed-forward.
+    let end = Instant::now() + Duration::from_millis(400);
+    while Instant::now() < end {
+        send(
+            &mut ctl,
+            &[
+                ("leg/kp1", 0.0),
+                ("leg/kd1", 0.0),
+                ("leg/torque1", 0.05),
+                ("leg/p1", 0.0),
+            ],
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    // Silence: the watchdog takes it out of motor mode; it coasts to a stop (no torque).
+    let s = p1.until(2.0, "tripped", |s| {
+        s.status & (status::TRIPPED | status::DISABLED | status::WATCHDOG)
+            == status::TRIPPED | status::DISABLED | status::WATCHDOG
+    });
+    assert!(s.value > 0.05, "it had moved: {s:?}");
+    exec.wait_log(2, "tripped by the command watchdog");
+    std::thread::sleep(Duration::from_millis(800));
+    assert!(!node(&sim, 0).enabled);
+    // Refused, not queued.
+    send(&mut ctl, &[("leg/p1", 1.0)]);
+    p1.until(1.0, "refused", |s| s.status & status::REJECTED != 0);
+
+    // enable = 1: from where it is now, with the manifest's gains, never the command from
+    // before the trip (which would push it away again).
+    let here = node(&sim, 0).position;
+    send(&mut ctl, &[("leg/e1", 1.0)]);
+    p1.until(1.0, "enabled", |s| {
+        s.status & (status::TRIPPED | status::DISABLED) == 0
+    });
+    assert!(node(&sim, 0).enabled);
+    // It holds there (keep the watchdog fed), not accelerating with the old feed-forward.
+    let end = Instant::now() + Duration::from_millis(400);
+    while Instant::now() < end {
+        send(&mut ctl, &[("leg/e1", 1.0)]);
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let now = node(&sim, 0).position;
+    assert!((now - here).abs() < 0.01, "moved on enable: {here} → {now}");
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+}
+
+#[test]
+fn a_motor_fault_trips_it_and_is_reported_once() {
+    let (sim, port) = adapter("mitfault", &[1, 2], true, &[]);
+    let (mut exec, d) = start("mitfault", &manifest(&port, 2, "", false));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut p2 = Watch::new(&bus, "leg/p2");
+    p2.until(2.0, "up", |s| s.status & status::DISABLED == 0);
+    // Motor over-temperature (code 6): the motor leaves motor mode and says so in every reply.
+    assert!(sim.sim().nodes_mut()[1].set_fault(6));
+    let all = status::DEVICE_FAULT | status::TRIPPED | status::DISABLED;
+    p2.until(2.0, "fault flags", |s| s.status & all == all);
+    exec.wait_log(2, "reports a fault: 0x6");
+    let mut stats = StatsSubscriber::new(&bus, "leg").unwrap();
+    let st = eventually(2, "stats", || {
+        stats.latest().unwrap().filter(|s| s.device_faults > 0)
+    });
+    assert_eq!(
+        (st.devices_faulted, st.devices_tripped, st.devices_enabled),
+        (1, 1, 1)
+    );
+    std::thread::sleep(Duration::from_millis(200));
+    assert_eq!(
+        exec.log()
+            .iter()
+            .filter(|l| l.contains("reports a fault"))
+            .count(),
+        1,
+        "once per transition"
+    );
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+}
+
+#[test]
+fn a_garbled_reply_line_publishes_nothing() {
+    let (sim, port) = adapter("garbage", &[1], false, &[]);
+    let (mut exec, d) = start("garbage", &manifest(&port, 1, "", false));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut p1 = Watch::new(&bus, "leg/p1");
+    p1.until(2.0, "up", |s| s.status & status::DISABLED == 0);
+    // A reply from motor 1 saying 0.9997 rad, with 4 extra hex digits (timestamps were never
+    // switched on): malformed, never a value.
+    for _ in 0..20 {
+        sim.sim().inject_to_host(b"t0006018A3C7AD838ABCD\r");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    p1.poll();
+    assert!(p1.all.len() > 50);
+    for s in &p1.all {
+        assert!(s.value.abs() < 0.01, "a wrong value was published: {s:?}");
+    }
+    assert!(exec.stop().success());
+}
+
+/// Least squares fit of value = a + b·t (t in s).
+fn fit(samples: &[StateSample]) -> (f64, f64) {
+    let n = samples.len() as f64;
+    let t0 = samples[0].t_sample_ns;
+    let ts: Vec<f64> = samples
+        .iter()
+        .map(|s| (s.t_sample_ns - t0) as f64 * 1e-9)
+        .collect();
+    let (mt, mv) = (
+        ts.iter().sum::<f64>() / n,
+        samples.iter().map(|s| s.value).sum::<f64>() / n,
+    );
+    let b = ts
+        .iter()
+        .zip(samples)
+        .map(|(t, s)| (t - mt) * (s.value - mv))
+        .sum::<f64>()
+        / ts.iter().map(|t| (t - mt) * (t - mt)).sum::<f64>();
+    (mv - b * mt, b)
+}
+
+#[test]
+fn after_a_stalled_adapter_every_sample_keeps_its_true_time() {
+    let (sim, port) = adapter("stall", &[1], false, &[]);
+    let (mut exec, d) = start("stall", &manifest(&port, 1, "", true));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "leg/p1");
+    // A steady speed: velocity 2 rad/s with kd 1, no stiffness (≈ 1.9 rad/s in the sim).
+    let drive = |ctl: &mut Controller| {
+        send(
+            ctl,
+            &[
+                ("leg/kp1", 0.0),
+                ("leg/velocity1", 2.0),
+                ("leg/torque1", 0.0),
+            ],
+        );
+    };
+    let phase = |ctl: &mut Controller, ms: u64| {
+        let end = Instant::now() + Duration::from_millis(ms);
+        while Instant::now() < end {
+            drive(ctl);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    };
+    phase(&mut ctl, 300);
+    p1.poll();
+    let skip = p1.all.len();
+    phase(&mut ctl, 300);
+    p1.poll();
+    let before: Vec<StateSample> = p1.all[skip..]
+        .iter()
+        .filter(|s| s.status & status::STALE == 0)
+        .copied()
+        .collect();
+    let (a, v) = fit(&before);
+    assert!((1.5..2.1).contains(&v), "steady speed {v}");
+    // The adapter stalls for 0.3 s, then delivers its backlog: ack k, reply k, ack k+1, ...
+    let until = sim.now_ns() + 300_000_000;
+    sim.sim().stall_until(until);
+    phase(&mut ctl, 500);
+    p1.poll();
+    let t_end_stall = before[0].t_sample_ns; // the fit's time origin
+    let mark = p1.all.len();
+    phase(&mut ctl, 300);
+    p1.poll();
+    let after: Vec<StateSample> = p1.all[mark..]
+        .iter()
+        .filter(|s| s.status & status::STALE == 0)
+        .copied()
+        .collect();
+    assert!(
+        after.len() > 50,
+        "{} fresh samples after the stall",
+        after.len()
+    );
+    // Every fresh sample lies on the same line as before the stall: a reply credited to the
+    // next request would put it one period (≈ 4 mrad at 1.9 rad/s) off, for ever.
+    let mut worst = 0.0f64;
+    for s in &after {
+        let t = (s.t_sample_ns - t_end_stall) as f64 * 1e-9;
+        worst = worst.max((s.value - (a + v * t)).abs());
+    }
+    assert!(
+        worst < 0.0025,
+        "off the line by {worst} rad after the stall"
+    );
+    // The backlog's answers came too late to be true: counted and dropped.
+    let mut stats = StatsSubscriber::new(&bus, "leg").unwrap();
+    let st = eventually(2, "stats", || stats.latest().unwrap());
+    assert!(st.late_replies > 0, "{st:?}");
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+}
+
+#[test]
+fn an_adapter_that_never_acknowledges_keeps_one_frame_per_motor_per_tick() {
+    let (sim, port) = adapter("noack", &[1, 2, 3], false, &[]);
+    sim.sim().set_acks(false);
+    let (mut exec, d) = start("noack", &manifest(&port, 3, "", false));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    // Detection takes 8 acknowledgement timeouts (100 ms each, overlapping).
+    let settle = Instant::now() + Duration::from_millis(500);
+    while Instant::now() < settle {
+        send(&mut ctl, &[("leg/p1", 0.1)]);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let before: Vec<u64> = (0..3).map(|i| node(&sim, i).frames_in).collect();
+    let t = Instant::now();
+    std::thread::sleep(Duration::from_secs(1));
+    let secs = t.elapsed().as_secs_f64();
+    for i in 0..3 {
+        let per_s = (node(&sim, i).frames_in - before[i]) as f64 / secs;
+        assert!(
+            (400.0..=520.0).contains(&per_s),
+            "motor {}: {per_s} frames/s",
+            i + 1
+        );
+    }
+    let mut stats = StatsSubscriber::new(&bus, "leg").unwrap();
+    let st = eventually(2, "stats", || stats.latest().unwrap());
+    assert!(
+        st.bus_errors >= 8,
+        "the missing acknowledgements are counted: {st:?}"
+    );
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+}
+
+#[test]
+fn an_odrive_axis_is_brought_to_closed_loop_where_it_is_and_idled_at_stop() {
+    let (sim, port) = adapter("odrive", &[], false, &[4]);
+    let text = format!(
+        "system = \"edge\"\n[subsystems.leg]\nrate_hz = 250\n\
+         [subsystems.leg.hardware.can0]\nkind = \"slcan\"\nport = \"{port}\"\n\
+         [subsystems.leg.protocols.can]\nkind = \"can_motors\"\nhardware = \"can0\"\ntimeout_us = 3000\n\
+         [subsystems.leg.devices.ax]\nkind = \"odrive_axis\"\nprotocol = \"can\"\nid = 4\n\
+         [subsystems.leg.states.p]\ndevice = \"ax\"\nchannel = \"position\"\nwritable = true\nmin = -3\nmax = 3\n\
+         [subsystems.leg.states.e]\ndevice = \"ax\"\nchannel = \"enable\"\nwritable = true\n"
+    );
+    assert!(!node(&sim, 0).enabled, "the axis starts idle");
+    let (mut exec, d) = start("odrive", &text);
+    assert!(node(&sim, 0).enabled, "closed loop after bring-up");
+    assert!(node(&sim, 0).position.abs() < 1e-6, "nothing moved");
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p = Watch::new(&bus, "leg/p");
+    send(&mut ctl, &[("leg/p", 1.0)]);
+    p.until(2.0, "moved", |s| (s.value - 1.0).abs() < 0.01);
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+    assert!(exec
+        .log()
+        .iter()
+        .any(|l| l.contains("(1 confirmed on the wire)")));
+    assert!(!node(&sim, 0).enabled, "idle after the stop");
+}
+
+#[test]
+fn the_adapter_unplugged_and_plugged_back_resumes_without_a_restart() {
+    let (sim, port) = adapter("canplug", &[1], false, &[]);
+    let (mut exec, d) = start("canplug", &manifest(&port, 1, "", false));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "leg/p1");
+    send(&mut ctl, &[("leg/p1", 0.5)]);
+    p1.until(2.0, "moved", |s| (s.value - 0.5).abs() < 0.01);
+    sim.unplug();
+    p1.until(1.0, "stale", |s| s.status & status::STALE != 0);
+    exec.wait_log(2, "vanished");
+    std::thread::sleep(Duration::from_millis(300));
+    sim.replug().unwrap();
+    let back = Instant::now();
+    let s = p1.until(3.0, "fresh", |s| {
+        s.status & (status::STALE | status::DISABLED) == 0
+    });
+    assert!(
+        back.elapsed() < Duration::from_secs(1),
+        "{:?}",
+        back.elapsed()
+    );
+    assert!((s.value - 0.5).abs() < 0.02, "{s:?}");
+    assert!(node(&sim, 0).enabled);
+    send(&mut ctl, &[("leg/p1", -0.5)]);
+    p1.until(2.0, "obeys again", |s| (s.value + 0.5).abs() < 0.01);
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+}
