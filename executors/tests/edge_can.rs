@@ -329,16 +329,23 @@ fn after_a_stalled_adapter_every_sample_keeps_its_true_time() {
         "{} fresh samples after the stall",
         after.len()
     );
-    // Every fresh sample lies on the same line as before the stall: a reply credited to the
-    // next request would put it one period (≈ 4 mrad at 1.9 rad/s) off, for ever.
-    let mut worst = 0.0f64;
-    for s in &after {
+    // The fresh samples lie on the same line as before the stall. A reply credited to the next
+    // request would shift every later sample by one period (≈ 3.8 mrad at 1.9 rad/s) for
+    // ever; one sample the simulator answered late (a loaded machine) moves alone. So compare
+    // the median distance to the line before and after.
+    let residual = |s: &StateSample| {
         let t = (s.t_sample_ns - t_end_stall) as f64 * 1e-9;
-        worst = worst.max((s.value - (a + v * t)).abs());
-    }
+        s.value - (a + v * t)
+    };
+    let median = |mut r: Vec<f64>| {
+        r.sort_by(f64::total_cmp);
+        r[r.len() / 2]
+    };
+    let shift = median(after.iter().map(residual).collect())
+        - median(before.iter().map(residual).collect());
     assert!(
-        worst < 0.0025,
-        "off the line by {worst} rad after the stall"
+        shift.abs() < 0.0015,
+        "after the stall the samples are {shift} rad off the line"
     );
     // The backlog's answers came too late to be true: counted and dropped.
     let mut stats = StatsSubscriber::new(&bus, "leg").unwrap();
