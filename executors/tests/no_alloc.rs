@@ -89,3 +89,131 @@ fn ten_thousand_ticks_allocate_nothing() {
     // Stats go out every 100 ms of executor time (20 ticks): the newest is at most 20 ticks old.
     assert!((10_030..=10_050).contains(&s.ticks), "{}", s.ticks);
 }
+
+/// The hardware edge allocates nothing either: a Dynamixel bus whose port vanishes (every read
+/// and write failing with an OS error), is reopened by the link's helper thread and handed back,
+/// and whose servos are brought up again (ping, configuration read, enable from where they
+/// are); then setpoints, a watchdog trip, refused setpoints and an enable. Every tick of it
+/// under the counting allocator, after the warm-up (the first bring-up and the bus's lazy
+/// connections).
+#[test]
+fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
+    use conductor_devices::sim::dxl::DxlSimConfig;
+    use conductor_devices::sim::fault::FaultConfig;
+    use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty};
+    use std::time::Duration;
+
+    let link = std::env::temp_dir().join(format!("conductor-noalloc-{}", std::process::id()));
+    let sim = run_dxl(
+        Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
+        DxlSimConfig {
+            ids: vec![1, 2],
+            ..DxlSimConfig::default()
+        },
+        FaultConfig::default(),
+        FaultConfig::default(),
+    );
+    let mut text = format!(
+        "system = \"na\"\n[subsystems.arm]\nrate_hz = 200\nwatchdog_ms = 100\n\
+         [subsystems.arm.hardware.uart]\nkind = \"serial\"\nport = \"{}\"\n\
+         [subsystems.arm.protocols.robotis]\nkind = \"dynamixel2\"\nhardware = \"uart\"\ntimeout_us = 10000\n",
+        link.display()
+    );
+    for i in 1..=2 {
+        text += &format!(
+            "[subsystems.arm.devices.j{i}]\nkind = \"dynamixel_x\"\nprotocol = \"robotis\"\nid = {i}\n\
+             [subsystems.arm.states.p{i}]\ndevice = \"j{i}\"\nchannel = \"position\"\nwritable = true\nmin = -1\nmax = 1\n\
+             [subsystems.arm.states.e{i}]\ndevice = \"j{i}\"\nchannel = \"enable\"\nwritable = true\n"
+        );
+    }
+    let m = Manifest::parse(&text, "na.toml").unwrap_or_else(|e| panic!("{e}"));
+    let sub = m.subsystems[0].clone();
+
+    prepare_thread();
+    let (domain, _guard) = support::private_domain("noalloc-edge");
+    let bus = Bus::open(&domain, "executor/arm").unwrap();
+    let mut exec = Executor::new(&bus, &sub).unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = StateSubscriber::with_buffer(&bus, "arm/p1", 64).unwrap();
+    let mut stats = StatsSubscriber::new(&bus, "arm").ok();
+
+    // Real time, 5 ms ticks: the simulator answers on its own thread.
+    let t0 = conductor_bus::monotonic_ns();
+    let mut k = 0u64;
+    let mut tick = |exec: &mut Executor| {
+        let due = t0 + k * 5_000_000;
+        let now = conductor_bus::monotonic_ns();
+        if due > now {
+            std::thread::sleep(Duration::from_nanos(due - now));
+        }
+        let now = conductor_bus::monotonic_ns();
+        let wake = Wake {
+            slot: k,
+            sched_ns: now,
+            late_ns: 0,
+            skipped: 0,
+        };
+        k += 1;
+        measured(|| exec.tick(&wake, now)).1
+    };
+    let flags = |sub: &mut StateSubscriber| {
+        let mut last = 0;
+        sub.drain(|s| last = s.status).unwrap();
+        last
+    };
+    // Warm-up: the first bring-up, and a frame so every connection exists.
+    for _ in 0..100 {
+        tick(&mut exec);
+        ctl.add_ctrl("arm/p1", 0.2).unwrap();
+        ctl.add_ctrl("arm/e1", 1.0).unwrap();
+        ctl.send_ctrl().unwrap();
+    }
+    assert!(exec.stages().settled(), "brought up");
+    if stats.is_none() {
+        stats = StatsSubscriber::new(&bus, "arm").ok();
+    }
+    flags(&mut p1);
+
+    let mut allocations = 0;
+    // The port vanishes: reads and writes fail, the link hands the dead port to its helper.
+    sim.unplug();
+    for _ in 0..60 {
+        allocations += tick(&mut exec);
+        ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        ctl.send_ctrl().unwrap();
+    }
+    let down = flags(&mut p1);
+    assert!(down & conductor_bus::status::STALE != 0, "stale while down: {down:#x}");
+    // Back: the link takes the reopened port, the servos are brought up again.
+    sim.replug().unwrap();
+    for _ in 0..150 {
+        allocations += tick(&mut exec);
+        ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        ctl.send_ctrl().unwrap();
+    }
+    let up = flags(&mut p1);
+    assert_eq!(up & conductor_bus::status::STALE, 0, "fresh again: {up:#x}");
+    // Silence: the watchdog trips them; a setpoint is refused; enable.
+    for _ in 0..40 {
+        allocations += tick(&mut exec);
+    }
+    ctl.add_ctrl("arm/p1", -0.3).unwrap();
+    ctl.send_ctrl().unwrap();
+    allocations += tick(&mut exec);
+    allocations += tick(&mut exec);
+    let tripped = flags(&mut p1);
+    assert!(tripped & conductor_bus::status::TRIPPED != 0, "{tripped:#x}");
+    assert!(tripped & conductor_bus::status::REJECTED != 0, "{tripped:#x}");
+    ctl.add_ctrl("arm/e1", 1.0).unwrap();
+    ctl.send_ctrl().unwrap();
+    for _ in 0..60 {
+        allocations += tick(&mut exec);
+        ctl.add_ctrl("arm/e1", 1.0).unwrap();
+        ctl.send_ctrl().unwrap();
+    }
+    assert_eq!(flags(&mut p1) & conductor_bus::status::TRIPPED, 0, "enabled again");
+    assert_eq!(allocations, 0, "the hardware edge allocated on the real-time thread");
+    let s = stats.unwrap().latest().unwrap().unwrap();
+    assert_eq!(s.bus_outages, 1, "{s:?}");
+    assert!(s.setpoints_refused >= 1, "{s:?}");
+}
