@@ -445,3 +445,36 @@ fn the_adapter_unplugged_and_plugged_back_resumes_without_a_restart() {
     p1.until(2.0, "obeys again", |s| (s.value + 0.5).abs() < 0.01);
     assert!(exec.stop().success(), "{:#?}", exec.log());
 }
+
+#[test]
+fn damp_keeps_motor_mode_with_no_stiffness_after_a_trip() {
+    let (sim, port) = adapter("damp", &[1], false, &[]);
+    let text = manifest(&port, 1, "watchdog_ms = 100", false).replace(
+        "kp = 20.0\nkd = 1.0\n",
+        "kp = 20.0\nkd = 1.0\nsafe_action = \"damp\"\nsafe_value = 0.5\n",
+    );
+    let (mut exec, d) = start("damp", &text);
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "leg/p1");
+    send(&mut ctl, &[("leg/p1", 0.3)]);
+    // Silence: the watchdog trips it to damping: still in motor mode (not disabled), tripped.
+    let s = p1.until(2.0, "tripped", |s| s.status & status::TRIPPED != 0);
+    assert_eq!(
+        s.status & status::DISABLED,
+        0,
+        "damping keeps motor mode: {s:?}"
+    );
+    std::thread::sleep(Duration::from_millis(100));
+    assert!(node(&sim, 0).enabled);
+    // Tripped: a setpoint is refused.
+    send(&mut ctl, &[("leg/p1", -0.3)]);
+    p1.until(1.0, "refused", |s| s.status & status::REJECTED != 0);
+    // A stop carries out the declared action too: damping, confirmed by the motor's answer.
+    assert!(exec.stop().success(), "{:#?}", exec.log());
+    assert!(exec
+        .log()
+        .iter()
+        .any(|l| l.contains("(1 confirmed on the wire)")));
+    assert!(node(&sim, 0).enabled, "damping after the stop, as declared");
+}

@@ -385,3 +385,51 @@ fn an_unplugged_port_is_reopened_and_the_servos_resume_without_a_restart() {
     p1.until(2.0, "obeys again", |s| (s.value + 0.25).abs() < 4.0 * PULSE);
     assert!(exec.stop().success(), "{:#?}", exec.log());
 }
+
+#[test]
+fn hold_off_stays_limp_until_the_first_setpoint_then_moves_from_where_it_is() {
+    let cfg = DxlSimConfig {
+        initial_position: 2200,
+        ..ids(1)
+    };
+    let (sim, port) = bus("holdoff", cfg);
+    let (r, d) = start("holdoff", &manifest(&port, 1, "", "startup = \"hold_off\""));
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut p1 = Watch::new(&bus, "arm/p1");
+    let s = p1.until(2.0, "published", |_| true);
+    assert!(s.status & status::DISABLED != 0, "limp: {s:?}");
+    assert!(!sim.sim().servo(1).unwrap().torque_on());
+    // Someone moves the limp joint by hand.
+    sim.sim().servo_mut(1).unwrap().set_present(2300);
+    std::thread::sleep(Duration::from_millis(100));
+    // The first setpoint enables it where it is now, then takes it to the target.
+    {
+        let s = sim.sim();
+        assert_eq!(
+            s.servo(1).unwrap().goal_position(),
+            2200,
+            "nothing written yet"
+        );
+    }
+    let mut ctl = Controller::new(&bus);
+    send(&mut ctl, &[("arm/p1", 0.0)]);
+    p1.until(2.0, "at the target", |s| {
+        s.status & status::DISABLED == 0 && s.value.abs() < 4.0 * PULSE
+    });
+    let s = sim.sim();
+    let log = s.instruction_log();
+    let goals: Vec<i32> = log
+        .iter()
+        .filter(|r| r.1 == 1 && r.3 == 116)
+        .map(|r| i32::from_le_bytes(r.4[..4].try_into().unwrap()))
+        .collect();
+    assert_eq!(
+        goals.first(),
+        Some(&2300),
+        "enabled where it was moved to: {goals:?}"
+    );
+    assert_eq!(goals.last(), Some(&2048), "then the setpoint: {goals:?}");
+    drop(s);
+    assert!(exec.stop().success());
+}

@@ -183,7 +183,10 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
         ctl.send_ctrl().unwrap();
     }
     let down = flags(&mut p1);
-    assert!(down & conductor_bus::status::STALE != 0, "stale while down: {down:#x}");
+    assert!(
+        down & conductor_bus::status::STALE != 0,
+        "stale while down: {down:#x}"
+    );
     // Back: the link takes the reopened port, the servos are brought up again.
     sim.replug().unwrap();
     for _ in 0..150 {
@@ -202,8 +205,14 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     allocations += tick(&mut exec);
     allocations += tick(&mut exec);
     let tripped = flags(&mut p1);
-    assert!(tripped & conductor_bus::status::TRIPPED != 0, "{tripped:#x}");
-    assert!(tripped & conductor_bus::status::REJECTED != 0, "{tripped:#x}");
+    assert!(
+        tripped & conductor_bus::status::TRIPPED != 0,
+        "{tripped:#x}"
+    );
+    assert!(
+        tripped & conductor_bus::status::REJECTED != 0,
+        "{tripped:#x}"
+    );
     ctl.add_ctrl("arm/e1", 1.0).unwrap();
     ctl.send_ctrl().unwrap();
     for _ in 0..60 {
@@ -211,8 +220,15 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
         ctl.add_ctrl("arm/e1", 1.0).unwrap();
         ctl.send_ctrl().unwrap();
     }
-    assert_eq!(flags(&mut p1) & conductor_bus::status::TRIPPED, 0, "enabled again");
-    assert_eq!(allocations, 0, "the hardware edge allocated on the real-time thread");
+    assert_eq!(
+        flags(&mut p1) & conductor_bus::status::TRIPPED,
+        0,
+        "enabled again"
+    );
+    assert_eq!(
+        allocations, 0,
+        "the hardware edge allocated on the real-time thread"
+    );
     let s = stats.unwrap().latest().unwrap().unwrap();
     assert_eq!(s.bus_outages, 1, "{s:?}");
     assert!(s.setpoints_refused >= 1, "{s:?}");
