@@ -335,14 +335,11 @@ impl OdriveAxis {
         self.sent = false;
         // A safe action is watched until it shows; the executor bounds the wait.
         if self.tries >= CONFIRM_POLLS && self.step != Step::Safe {
-            match self.step {
-                Step::Enable => {
-                    self.status.failure = Some(Failure::EnableRefused);
-                    self.status.phase = Phase::Disabled;
-                    self.goal = Goal::Limp;
-                }
-                // The action stays unconfirmed.
-                _ => {}
+            // Any other action stays unconfirmed.
+            if self.step == Step::Enable {
+                self.status.failure = Some(Failure::EnableRefused);
+                self.status.phase = Phase::Disabled;
+                self.goal = Goal::Limp;
             }
             self.step = Step::None;
         }
@@ -521,14 +518,11 @@ impl Device for OdriveAxis {
             };
             self.push(Message::SetAxisState { requested_state }, ctx, out);
         }
-        match self.status.phase {
-            Phase::Unmanaged | Phase::Enabled => {
-                if std::mem::take(&mut self.dirty) {
-                    self.push(self.setpoint(), ctx, out);
-                }
-            }
-            // Holding: the axis keeps its input by itself.
-            _ => {}
+        // Holding (any other phase): the axis keeps its input by itself.
+        if matches!(self.status.phase, Phase::Unmanaged | Phase::Enabled)
+            && std::mem::take(&mut self.dirty)
+        {
+            self.push(self.setpoint(), ctx, out);
         }
     }
 
