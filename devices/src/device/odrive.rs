@@ -334,14 +334,11 @@ impl OdriveAxis {
         self.tries += 1;
         self.sent = false;
         if self.tries >= CONFIRM_POLLS {
-            match self.step {
-                Step::Enable => {
-                    self.status.failure = Some(Failure::EnableRefused);
-                    self.status.phase = Phase::Disabled;
-                    self.goal = Goal::Limp;
-                }
-                // The action stays unconfirmed.
-                _ => {}
+            // Otherwise (a safe action) the action stays unconfirmed.
+            if self.step == Step::Enable {
+                self.status.failure = Some(Failure::EnableRefused);
+                self.status.phase = Phase::Disabled;
+                self.goal = Goal::Limp;
             }
             self.step = Step::None;
         }
@@ -520,14 +517,11 @@ impl Device for OdriveAxis {
             };
             self.push(Message::SetAxisState { requested_state }, ctx, out);
         }
-        match self.status.phase {
-            Phase::Unmanaged | Phase::Enabled => {
-                if std::mem::take(&mut self.dirty) {
-                    self.push(self.setpoint(), ctx, out);
-                }
-            }
-            // Holding: the axis keeps its input by itself.
-            _ => {}
+        // Holding (or any other phase): the axis keeps its input by itself.
+        if matches!(self.status.phase, Phase::Unmanaged | Phase::Enabled)
+            && std::mem::take(&mut self.dirty)
+        {
+            self.push(self.setpoint(), ctx, out);
         }
     }
 
