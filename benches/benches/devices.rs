@@ -10,8 +10,26 @@
 //!    status packet's return delay and wire time); the achievable loop rate is its inverse.
 //!    USB adapter latency (1 ms FTDI latency timer, or less with `low_latency`) is host side and
 //!    not on the wire: it limits a request/response loop on top of these figures.
+//! 3. **Read layout** (measured, printed): the Hubo reading Hardware Error Status (70, 1 B),
+//!    Present Current (126, 2 B), Present Velocity (128, 4 B) and Present Position (132, 4 B)
+//!    every cycle. The protocol stage runs against the in-process simulator
+//!    (`support/dxl_reads.rs`), once with the layout the device chooses (indirect addressing,
+//!    11 B per servo) and once with the registers' contiguous span (70..136, 66 B), each with
+//!    SYNC READ and FAST SYNC READ; the simulator counts the bytes of every cycle. Beside them,
+//!    what DynamixelSDK's group classes would send for the same registers, computed from the
+//!    packet layouts, and its minimum. `tests/dxl_read_layout.rs` asserts the same figures.
+//!
+//!    The servos are set up directly (unmanaged devices; the stage writes the Indirect
+//!    Addresses the devices report): the FAST SYNC READ stage cannot receive a combined reply
+//!    longer than its 1024-byte packet buffer, which bring-up's configuration read exceeds on a
+//!    bus of more than a few servos, and which the contiguous span exceeds from 15 servos on
+//!    (those rows say so: their values are all missing). The test checks that, with SYNC
+//!    READ, the devices' own bring-up leads to the same bytes per cycle.
 
 use std::time::Duration;
+
+#[path = "support/dxl_reads.rs"]
+mod dxl_reads;
 
 use conductor_devices::device::{x_channel, DxlXConfig, DynamixelX};
 use conductor_devices::protocol::{Dxl2Protocol, Dxl2ReadMode, Timing};
@@ -210,9 +228,107 @@ fn utilisation() {
     }
 }
 
+fn read_layout() {
+    use dxl_reads::{measure, sdk_minimum, sdk_reads, wire_ns, Reading, Setup, REGISTERS};
+    const CYCLES: u64 = 20;
+    let splits = [(1u8, 41u8), (2, 21), (4, 11)];
+    println!();
+    println!(
+        "Read layout, 41-DOF Hubo: Hardware Error Status (70, 1 B), Present Current (126, 2 B), \
+         Present Velocity (128, 4 B)"
+    );
+    println!(
+        "and Present Position (132, 4 B) read every cycle, per bus; the goal positions in one \
+         SYNC WRITE beside them."
+    );
+    println!(
+        "Measured: the protocol stage against the simulator, {CYCLES} cycles each, every one \
+         the same bytes; return delay 0,"
+    );
+    println!("so the wire time is 10 bits per byte. SDK minimum: of the read mode (below).");
+    println!(
+        "| buses | servos/bus | baud | read | layout | B/servo | bytes/cycle | wire µs | max Hz \
+         | SDK minimum | ours / SDK | with goal SYNC WRITE: bytes / µs / max Hz | values |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (buses, n) in splits {
+        for baud in [1_000_000u32, 4_000_000] {
+            for (mode, fast, read) in [
+                (Dxl2ReadMode::Sync, false, "SYNC READ"),
+                (Dxl2ReadMode::Fast, true, "FAST SYNC READ"),
+            ] {
+                let sdk = sdk_minimum(n, &REGISTERS, fast);
+                for reading in [Reading::Chosen, Reading::Contiguous] {
+                    let m = measure(n, mode, reading, Setup::Direct, baud, CYCLES);
+                    let layout = match reading {
+                        Reading::Chosen if m.layout.indirect > 0 => "chosen: indirect",
+                        Reading::Chosen => "chosen: span",
+                        Reading::Contiguous => "contiguous span",
+                    };
+                    let ns = wire_ns(m.read_bytes, baud);
+                    let all = m.read_bytes + m.write_bytes;
+                    let all_ns = wire_ns(all, baud);
+                    let values = if m.complete(n) {
+                        "all".to_string()
+                    } else {
+                        format!(
+                            "{} of {} missing (stage buffer 1024 B)",
+                            m.missing,
+                            m.cycles * n as u64 * 4
+                        )
+                    };
+                    println!(
+                        "| {buses} | {n} | {:.0}M | {read} | {layout} | {} | {} | {:.0} | {:.0} \
+                         | {} | {:.2} | {all} / {:.0} / {:.0} | {values} |",
+                        baud as f64 / 1e6,
+                        m.per_servo(),
+                        m.read_bytes,
+                        ns / 1e3,
+                        1e9 / ns,
+                        sdk.bytes,
+                        m.read_bytes as f64 / sdk.bytes as f64,
+                        all_ns / 1e3,
+                        1e9 / all_ns,
+                    );
+                }
+            }
+        }
+    }
+    println!();
+    println!(
+        "DynamixelSDK, the same registers, bytes per cycle (instruction(s) + status packets, \
+         before byte stuffing), computed from"
+    );
+    println!("the packet layouts (protocols.md §1.2, §1.5, §1.7); max Hz at 1 Mbit/s in brackets:");
+    let ns: Vec<u8> = splits.iter().map(|s| s.1).collect();
+    let head: Vec<String> = ns.iter().map(|n| format!("{n} servos")).collect();
+    println!("| DynamixelSDK read | {} |", head.join(" | "));
+    println!("|---|{}", "---|".repeat(ns.len()));
+    let ways: Vec<Vec<_>> = ns.iter().map(|&n| sdk_reads(n, &REGISTERS)).collect();
+    for w in 0..ways[0].len() {
+        let first = &ways[0][w];
+        let tag = if first.name == sdk_minimum(ns[0], &REGISTERS, true).name {
+            " **← SDK minimum**"
+        } else if first.name == sdk_minimum(ns[0], &REGISTERS, false).name {
+            " **← minimum without FAST SYNC READ**"
+        } else {
+            ""
+        };
+        let cells: Vec<String> = ways
+            .iter()
+            .map(|ws| {
+                let b = ws[w].bytes;
+                format!("{b} ({:.0})", 1e9 / wire_ns(b, 1_000_000))
+            })
+            .collect();
+        println!("| {}{tag} | {} |", first.name, cells.join(" | "));
+    }
+}
+
 fn main() {
     let mut c = Criterion::default().configure_from_args();
     cpu_per_cycle(&mut c);
     c.final_summary();
     utilisation();
+    read_layout();
 }
