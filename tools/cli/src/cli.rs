@@ -77,6 +77,11 @@ Examples:\n  conductor launch deploy/minihubo-right-leg.toml\n  conductor launch
         after_help = "Values outside the state's limits are refused unless --clamp is given,
 then they are clamped to the nearest limit before sending. NaN and inf are always refused.
 
+Then it waits (up to --wait) for a sample of the state from a tick after the frame: when that
+sample says the executor refused the setpoint (REJECTED), it exits with status 1 saying why (the
+device is tripped or disabled: the error names the state that enables it again). With --wait 0,
+or when no such sample comes in time, a note says the verdict was not checked.
+
 Examples:\n  conductor set leg/knee 0.5\n  conductor set leg/knee -3 --clamp"
     )]
     Set(SetArgs),
@@ -196,7 +201,8 @@ pub struct SetArgs {
     /// Clamp an out-of-limit value to the nearest limit instead of refusing it.
     #[arg(long)]
     pub clamp: bool,
-    /// How long to wait for the state's first sample after the frame (seconds; 0 = don't).
+    /// How long to wait for a sample from a tick after the frame, which carries the executor's
+    /// verdict (seconds; 0 = don't wait, don't check).
     #[arg(long, default_value_t = 1.0, value_name = "S")]
     pub wait: f64,
 }
