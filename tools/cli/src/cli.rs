@@ -77,6 +77,11 @@ Examples:\n  conductor launch deploy/minihubo-right-leg.toml\n  conductor launch
         after_help = "Values outside the state's limits are refused unless --clamp is given,
 then they are clamped to the nearest limit before sending. NaN and inf are always refused.
 
+Then it waits (up to --wait) for a sample of the state from a tick after the frame: when that
+sample says the executor refused the setpoint (REJECTED), it exits with status 1 saying why (the
+device is tripped or disabled: the error names the state that enables it again). With --wait 0,
+or when no such sample comes in time, a note says the verdict was not checked.
+
 Examples:\n  conductor set leg/knee 0.5\n  conductor set leg/knee -3 --clamp"
     )]
     Set(SetArgs),
@@ -85,8 +90,21 @@ Examples:\n  conductor set leg/knee 0.5\n  conductor set leg/knee -3 --clamp"
         after_help = "Examples:\n  conductor echo leg/knee\n  conductor echo 'leg/*' --rate 5 --count 50"
     )]
     Echo(EchoArgs),
-    /// Executor health per subsystem: achieved rate, lateness, misses, bus errors, stale states.
-    #[command(after_help = "Examples:\n  conductor top\n  conductor top --once")]
+    /// Executor health per subsystem: rate, lateness, misses, stale states, devices, buses,
+    /// refused setpoints.
+    #[command(
+        after_help = "Columns: HZ achieved tick rate; P99_US tick lateness p99 (µs); MISS deadlines
+missed; STALE stale/all states; DEV devices enabled/all (- when it has none); TRIP devices tripped
+now (they refuse setpoints until enabled again); FAULT devices reporting a fault now; BUS_ERR bus
+errors; OUTAGE times a bus vanished; LATE replies that came after their request was given up;
+REFUSED setpoints refused because their device was disabled or tripped; AGE of the stats message.
+--wide names them in full (RATE_HZ, LATE_P99_US, MISSES, ENABLED, TRIPPED, FAULTED, OUTAGES,
+LATE_REPLIES) and adds TARGET_HZ, LATE_P50_US, LATE_MAX_US, LINKS_DOWN (buses down now), FRAMES,
+REJECTED (setpoints rejected for any reason), CLAMPED, WATCHDOG (watchdog trips), FAULTS (fault
+transitions) and RT (fifo@<cpu>, fifo or no).
+
+Examples:\n  conductor top\n  conductor top --once --wide"
+    )]
     Top(TopArgs),
     /// Record states to an MCAP file (one channel per state, JSON, zstd chunks, indexed).
     #[command(
@@ -183,7 +201,8 @@ pub struct SetArgs {
     /// Clamp an out-of-limit value to the nearest limit instead of refusing it.
     #[arg(long)]
     pub clamp: bool,
-    /// How long to wait for the state's first sample after the frame (seconds; 0 = don't).
+    /// How long to wait for a sample from a tick after the frame, which carries the executor's
+    /// verdict (seconds; 0 = don't wait, don't check).
     #[arg(long, default_value_t = 1.0, value_name = "S")]
     pub wait: f64,
 }
@@ -225,6 +244,9 @@ pub struct TopArgs {
     /// How long to wait for the first stats of each executor (seconds).
     #[arg(long, default_value_t = 1.0, value_name = "S")]
     pub wait: f64,
+    /// Every figure, with full column names (about 220 columns) instead of the health summary.
+    #[arg(long, short)]
+    pub wide: bool,
 }
 
 /// `conductor record`.

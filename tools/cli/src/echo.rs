@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::time::{Duration, Instant};
 
-use conductor_bus::{Bus, StateSample, StateSubscriber};
+use conductor_bus::{status, Bus, StateSample, StateSubscriber};
 
 use crate::cli::EchoArgs;
 use crate::error::{CliError, Result};
@@ -26,6 +26,7 @@ fn line(e: &Echoed, s: &StateSample, json: bool) -> String {
             "t_sample": t,
             "value": s.value,
             "status": s.status,
+            "flags": status::names(s.status).collect::<Vec<_>>(),
             "seq": s.seq,
             "tick": s.tick,
         })

@@ -46,6 +46,16 @@ pub enum CliError {
         /// What `--clamp` would send.
         clamped: f64,
     },
+    /// The executor refused a setpoint: a sample published after the frame carries `REJECTED`.
+    #[error("the executor refused {state} <- {value}: {reason}")]
+    Refused {
+        /// The state.
+        state: String,
+        /// The value sent (as printed).
+        value: String,
+        /// Why, from the sample's flags, with what to do about it.
+        reason: String,
+    },
     /// Nothing arrived in time.
     #[error("timed out: {0}")]
     Timeout(String),

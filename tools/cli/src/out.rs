@@ -92,6 +92,11 @@ mod tests {
             flags(status::CLAMPED | status::SIMULATED),
             "clamped,simulated"
         );
+        // ABI v2: a refused setpoint of a tripped device reads as such.
+        assert_eq!(
+            flags(status::REJECTED | status::WATCHDOG | status::DISABLED | status::TRIPPED),
+            "rejected,watchdog,disabled,tripped"
+        );
         assert_eq!(limits(f64::NEG_INFINITY, 1.5), "[-inf,1.5]");
     }
 

@@ -47,7 +47,7 @@ pub const SCHEMA: &str = r#"{
       "type": "integer",
       "minimum": 0,
       "maximum": 4294967295,
-      "description": "Status flags: 1 stale, 2 clamped, 4 rejected, 8 watchdog, 16 device-fault, 32 replayed, 64 simulated."
+      "description": "Status flags: 1 stale, 2 clamped, 4 rejected, 8 watchdog, 16 device-fault, 32 replayed, 64 simulated, 128 disabled, 256 tripped."
     },
     "t_sample": {
       "type": "number",

@@ -14,54 +14,174 @@ fn us(ns: u64) -> String {
     format!("{:.1}", ns as f64 / 1e3)
 }
 
-/// The table row of one executor.
-pub fn row(subsystem: &str, s: Option<&ExecutorStats>, now_ns: u64) -> Vec<String> {
-    let Some(s) = s else {
-        let mut r = vec![subsystem.to_string(), "no-stats".into()];
-        r.extend(std::iter::repeat_n("-".to_string(), 13));
-        return r;
-    };
-    vec![
-        subsystem.to_string(),
-        format!("{:.1}", s.achieved_rate_hz),
-        format!("{:.1}", s.base_rate_hz),
-        us(s.lateness_p50_ns),
-        us(s.lateness_p99_ns),
-        us(s.lateness_max_ns),
-        s.misses.to_string(),
-        s.bus_errors.to_string(),
-        format!("{}/{}", s.stale_states, s.states),
-        s.frames_applied.to_string(),
-        s.setpoints_rejected.to_string(),
-        s.setpoints_clamped.to_string(),
-        s.watchdog_trips.to_string(),
-        match (s.rt_active, s.cpu) {
+/// One column of the table: its header in the default (narrow) and `--wide` tables, and its
+/// cell. Columns without a narrow header appear only in the wide table.
+struct Column {
+    narrow: Option<&'static str>,
+    wide: &'static str,
+    cell: fn(&ExecutorStats, u64) -> String,
+}
+
+/// `done/total`, or `-` when there is no total.
+fn of(n: u32, total: u32) -> String {
+    if total == 0 {
+        "-".into()
+    } else {
+        format!("{n}/{total}")
+    }
+}
+
+/// Every column after SUBSYSTEM, in table order. The narrow table (the default) keeps what tells
+/// whether a subsystem is healthy and fits about 100 columns; `--wide` has every figure.
+const COLUMNS: [Column; 22] = [
+    Column {
+        narrow: Some("HZ"),
+        wide: "RATE_HZ",
+        cell: |s, _| format!("{:.1}", s.achieved_rate_hz),
+    },
+    Column {
+        narrow: None,
+        wide: "TARGET_HZ",
+        cell: |s, _| format!("{:.1}", s.base_rate_hz),
+    },
+    Column {
+        narrow: None,
+        wide: "LATE_P50_US",
+        cell: |s, _| us(s.lateness_p50_ns),
+    },
+    Column {
+        narrow: Some("P99_US"),
+        wide: "LATE_P99_US",
+        cell: |s, _| us(s.lateness_p99_ns),
+    },
+    Column {
+        narrow: None,
+        wide: "LATE_MAX_US",
+        cell: |s, _| us(s.lateness_max_ns),
+    },
+    Column {
+        narrow: Some("MISS"),
+        wide: "MISSES",
+        cell: |s, _| s.misses.to_string(),
+    },
+    Column {
+        narrow: Some("STALE"),
+        wide: "STALE",
+        cell: |s, _| format!("{}/{}", s.stale_states, s.states),
+    },
+    Column {
+        narrow: Some("DEV"),
+        wide: "ENABLED",
+        cell: |s, _| of(s.devices_enabled, s.devices),
+    },
+    Column {
+        narrow: Some("TRIP"),
+        wide: "TRIPPED",
+        cell: |s, _| s.devices_tripped.to_string(),
+    },
+    Column {
+        narrow: Some("FAULT"),
+        wide: "FAULTED",
+        cell: |s, _| s.devices_faulted.to_string(),
+    },
+    Column {
+        narrow: None,
+        wide: "LINKS_DOWN",
+        cell: |s, _| s.links_down.to_string(),
+    },
+    Column {
+        narrow: Some("BUS_ERR"),
+        wide: "BUS_ERR",
+        cell: |s, _| s.bus_errors.to_string(),
+    },
+    Column {
+        narrow: Some("OUTAGE"),
+        wide: "OUTAGES",
+        cell: |s, _| s.bus_outages.to_string(),
+    },
+    Column {
+        narrow: Some("LATE"),
+        wide: "LATE_REPLIES",
+        cell: |s, _| s.late_replies.to_string(),
+    },
+    Column {
+        narrow: None,
+        wide: "FRAMES",
+        cell: |s, _| s.frames_applied.to_string(),
+    },
+    Column {
+        narrow: None,
+        wide: "REJECTED",
+        cell: |s, _| s.setpoints_rejected.to_string(),
+    },
+    Column {
+        narrow: Some("REFUSED"),
+        wide: "REFUSED",
+        cell: |s, _| s.setpoints_refused.to_string(),
+    },
+    Column {
+        narrow: None,
+        wide: "CLAMPED",
+        cell: |s, _| s.setpoints_clamped.to_string(),
+    },
+    Column {
+        narrow: None,
+        wide: "WATCHDOG",
+        cell: |s, _| s.watchdog_trips.to_string(),
+    },
+    Column {
+        narrow: None,
+        wide: "FAULTS",
+        cell: |s, _| s.device_faults.to_string(),
+    },
+    Column {
+        narrow: None,
+        wide: "RT",
+        cell: |s, _| match (s.rt_active, s.cpu) {
             (0, _) => "no".into(),
             (_, c) if c < 0 => "fifo".into(),
             (_, c) => format!("fifo@{c}"),
         },
-        out::age(now_ns.saturating_sub(s.t_ns) as f64 * 1e-9).replace(' ', ""),
-    ]
+    },
+    Column {
+        narrow: Some("AGE"),
+        wide: "AGE",
+        cell: |s, now| out::age(now.saturating_sub(s.t_ns) as f64 * 1e-9).replace(' ', ""),
+    },
+];
+
+fn columns(wide: bool) -> impl Iterator<Item = &'static Column> {
+    COLUMNS.iter().filter(move |c| wide || c.narrow.is_some())
 }
 
-/// The column headers, matching [`row`].
-pub const HEADER: [&str; 15] = [
-    "SUBSYSTEM",
-    "RATE_HZ",
-    "TARGET_HZ",
-    "LATE_P50_US",
-    "LATE_P99_US",
-    "LATE_MAX_US",
-    "MISSES",
-    "BUS_ERR",
-    "STALE",
-    "FRAMES",
-    "REJECTED",
-    "CLAMPED",
-    "WATCHDOG",
-    "RT",
-    "AGE",
-];
+/// The column headers of the narrow (default) or `--wide` table, matching [`row`].
+pub fn header(wide: bool) -> Vec<&'static str> {
+    std::iter::once("SUBSYSTEM")
+        .chain(columns(wide).map(|c| {
+            if wide {
+                c.wide
+            } else {
+                c.narrow.unwrap_or(c.wide)
+            }
+        }))
+        .collect()
+}
+
+/// The table row of one executor (`no-stats` and dashes before its first stats message).
+pub fn row(subsystem: &str, s: Option<&ExecutorStats>, now_ns: u64, wide: bool) -> Vec<String> {
+    let mut r = vec![subsystem.to_string()];
+    match s {
+        Some(s) => r.extend(columns(wide).map(|c| (c.cell)(s, now_ns))),
+        None => {
+            r.push("no-stats".into());
+            r.extend(std::iter::repeat_n(
+                "-".to_string(),
+                columns(wide).count() - 1,
+            ));
+        }
+    }
+    r
+}
 
 /// Prints `--count` tables (or until Ctrl-C); returns the number printed.
 pub fn run(bus: &Bus, args: &TopArgs) -> Result<u64> {
@@ -102,9 +222,9 @@ pub fn run(bus: &Bus, args: &TopArgs) -> Result<u64> {
         }
         first = false;
         let now = monotonic_ns();
-        let mut rows = vec![HEADER.map(String::from).to_vec()];
+        let mut rows = vec![header(args.wide).into_iter().map(String::from).collect()];
         for ((name, _), s) in subs.iter().zip(&latest) {
-            rows.push(row(name, s.as_ref(), now));
+            rows.push(row(name, s.as_ref(), now, args.wide));
         }
         let mut text = String::new();
         if clear {

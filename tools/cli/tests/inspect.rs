@@ -254,6 +254,15 @@ fn top_prints_the_stats_service_figures() {
                     s.states = 4;
                     s.rt_active = 1;
                     s.cpu = 1;
+                    s.bus_outages = 2;
+                    s.device_faults = 3;
+                    s.late_replies = 4;
+                    s.setpoints_refused = 6;
+                    s.devices = 3;
+                    s.devices_enabled = 2;
+                    s.devices_tripped = 1;
+                    s.devices_faulted = 1;
+                    s.links_down = 1;
                 })
                 .unwrap();
             std::thread::sleep(Duration::from_millis(50));
@@ -267,28 +276,97 @@ fn top_prints_the_stats_service_figures() {
         vec![state(0, "u", "V", true, (-1.0, 1.0), 500.0, "")],
     );
 
+    let table = |out: &str| -> Vec<Vec<String>> {
+        out.lines()
+            .map(|l| l.split_whitespace().map(str::to_string).collect())
+            .collect()
+    };
+    let find = |rows: &[Vec<String>], name: &str| -> Vec<String> {
+        rows.iter().find(|r| r[0] == name).expect(name).clone()
+    };
+
+    // The default table: the health summary, within 100 columns.
     let out = ok(conductor(&d).args(["top", "--once"]));
-    let rows: Vec<Vec<&str>> = out
-        .lines()
-        .map(|l| l.split_whitespace().collect())
-        .collect();
+    let rows = table(&out);
     assert_eq!(rows[0], ["domain", d.name()]);
-    assert_eq!(rows[1][..14], top_header(), "{out}");
-    let arm = rows.iter().find(|r| r[0] == "arm").expect("arm row");
-    // Rates with one decimal, lateness in µs with one decimal, counters verbatim.
+    assert_eq!(rows[1], conductor_cli::top::header(false), "{out}");
     assert_eq!(
-        arm[..14],
+        rows[1],
         [
-            "arm", "999.5", "1000.0", "12.3", "45.7", "789.0", "3", "7", "1/4", "11", "2", "5",
-            "1", "fifo@1"
+            "SUBSYSTEM",
+            "HZ",
+            "P99_US",
+            "MISS",
+            "STALE",
+            "DEV",
+            "TRIP",
+            "FAULT",
+            "BUS_ERR",
+            "OUTAGE",
+            "LATE",
+            "REFUSED",
+            "AGE"
+        ]
+    );
+    assert!(out.lines().all(|l| l.chars().count() <= 100), "{out}");
+    let arm = find(&rows, "arm");
+    // Rates with one decimal, lateness in µs with one decimal, counters verbatim, devices
+    // enabled/all; AGE is one word (no space before its unit).
+    assert_eq!(
+        arm[..12],
+        ["arm", "999.5", "45.7", "3", "1/4", "2/3", "1", "1", "7", "2", "4", "6"],
+        "{out}"
+    );
+    assert_eq!(arm.len(), 13, "{out}");
+    // The simulator's own figures: it ticks at 500 Hz, publishes one state, has no devices.
+    let m = find(&rows, "motor");
+    assert_eq!((m[4].as_str(), m[5].as_str()), ("0/1", "-"), "{out}");
+    let achieved: f64 = m[1].parse().unwrap();
+    assert!(achieved > 0.0 && achieved < 600.0, "{out}");
+
+    // --wide: every figure, full names.
+    let out = ok(conductor(&d).args(["top", "--once", "--wide"]));
+    let rows = table(&out);
+    assert_eq!(rows[1], conductor_cli::top::header(true), "{out}");
+    assert_eq!(
+        rows[1],
+        [
+            "SUBSYSTEM",
+            "RATE_HZ",
+            "TARGET_HZ",
+            "LATE_P50_US",
+            "LATE_P99_US",
+            "LATE_MAX_US",
+            "MISSES",
+            "STALE",
+            "ENABLED",
+            "TRIPPED",
+            "FAULTED",
+            "LINKS_DOWN",
+            "BUS_ERR",
+            "OUTAGES",
+            "LATE_REPLIES",
+            "FRAMES",
+            "REJECTED",
+            "REFUSED",
+            "CLAMPED",
+            "WATCHDOG",
+            "FAULTS",
+            "RT",
+            "AGE"
+        ]
+    );
+    let arm = find(&rows, "arm");
+    assert_eq!(
+        arm[..22],
+        [
+            "arm", "999.5", "1000.0", "12.3", "45.7", "789.0", "3", "1/4", "2/3", "1", "1", "1",
+            "7", "2", "4", "11", "2", "6", "5", "1", "3", "fifo@1"
         ],
         "{out}"
     );
-    // The simulator's own figures: it ticks at 500 Hz and publishes one state.
-    let m = rows.iter().find(|r| r[0] == "motor").expect("motor row");
-    assert_eq!((m[2], m[8], m[13]), ("500.0", "0/1", "no"), "{out}");
-    let achieved: f64 = m[1].parse().unwrap();
-    assert!(achieved > 0.0 && achieved < 600.0, "{out}");
+    let m = find(&rows, "motor");
+    assert_eq!((m[2].as_str(), m[21].as_str()), ("500.0", "no"), "{out}");
 
     // --count prints that many tables.
     let out = ok(conductor(&d).args(["top", "--count", "2", "--interval", "0.2"]));
@@ -296,11 +374,6 @@ fn top_prints_the_stats_service_figures() {
     drop(motor);
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     fake.join().unwrap();
-}
-
-fn top_header() -> [&'static str; 14] {
-    let h = conductor_cli::top::HEADER;
-    std::array::from_fn(|i| h[i])
 }
 
 #[test]

@@ -106,7 +106,9 @@ fn list_set_get_echo_top_against_a_launched_manifest() {
     }
 
     // top: one row per executor, at the manifest's base rates, normal scheduling (--no-rt).
-    let out = ok(conductor(&d).args(["top", "--once"]));
+    let out = ok(conductor(&d).args(["top", "--once", "--wide"]));
+    let header: Vec<&str> = out.lines().nth(1).unwrap().split_whitespace().collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
     for (sub, target, states) in [("arm", "200.0", "6"), ("sensors", "250.0", "3")] {
         let r: Vec<&str> = out
             .lines()
@@ -114,10 +116,15 @@ fn list_set_get_echo_top_against_a_launched_manifest() {
             .unwrap_or_else(|| panic!("no {sub} row: {out}"))
             .split_whitespace()
             .collect();
-        assert_eq!(r[2], target, "{out}");
-        assert!(r[8].ends_with(&format!("/{states}")), "{out}");
-        assert_eq!(r[13], "no", "{out}");
-        let achieved: f64 = r[1].parse().unwrap();
+        assert_eq!(r[col("TARGET_HZ")], target, "{out}");
+        assert!(r[col("STALE")].ends_with(&format!("/{states}")), "{out}");
+        assert_eq!(r[col("RT")], "no", "{out}");
+        // One device per state; nothing tripped, faulted or refused on simulated buses.
+        assert!(r[col("ENABLED")].ends_with(&format!("/{states}")), "{out}");
+        for c in ["TRIPPED", "FAULTED", "LINKS_DOWN", "OUTAGES", "REFUSED"] {
+            assert_eq!(r[col(c)], "0", "{c}: {out}");
+        }
+        let achieved: f64 = r[col("RATE_HZ")].parse().unwrap();
         let target: f64 = target.parse().unwrap();
         assert!(achieved > 0.5 * target && achieved < 1.1 * target, "{out}");
     }
