@@ -16,16 +16,18 @@ const BAUD: u32 = 1_000_000;
 const CYCLES: u64 = 10;
 
 /// The device's choice, the contiguous span, and the SDK minimum, 41 servos on one bus. The
-/// servos are set up directly (the indirect addresses written through the stage): the FAST
-/// stage cannot receive bring-up's combined replies for 41 servos (see
+/// servos are set up directly (the indirect addresses written through the stage; see
 /// `direct_setup_reads_what_bring_up_reads`).
 /// FAST SYNC READ of 11 B: (14 + 41) + (8 + 41·(4 + 11)) = 55 + 623 = 678 B.
 /// SYNC READ of 11 B: 55 + 41·(11 + 11) = 55 + 902 = 957 B.
-/// The span (70..136, 66 B): FAST 55 + 8 + 41·70 = 2933 B, SYNC 55 + 41·77 = 3212 B.
+/// The span (70..136, 66 B): SYNC 55 + 41·77 = 3212 B. As FAST SYNC READ its combined reply
+/// would be 8 + 41·70 = 2878 B, more than the 1 KiB packet buffer of the stage (and of the
+/// DynamixelSDK, whose GroupFastSyncRead would send 2933 B and receive nothing), so the stage
+/// reads the span with SYNC READ in both modes.
 #[test]
 fn hubo_reads_at_the_sdk_minimum_and_indirect_beats_the_span() {
     for (mode, fast, chosen, span) in [
-        (Dxl2ReadMode::Fast, true, 678, 2933),
+        (Dxl2ReadMode::Fast, true, 678, 3212),
         (Dxl2ReadMode::Sync, false, 957, 3212),
     ] {
         let ours = measure(41, mode, Reading::Chosen, Setup::Direct, BAUD, CYCLES);
@@ -57,20 +59,24 @@ fn hubo_reads_at_the_sdk_minimum_and_indirect_beats_the_span() {
             },
             "configure_reads not called: no layout chosen"
         );
+        assert!(
+            contiguous.complete(41),
+            "{mode:?}: every value of the span delivered: {contiguous:?}"
+        );
         assert_eq!(contiguous.read_bytes, span, "{mode:?}: the span");
         assert!(ours.read_bytes < contiguous.read_bytes);
-        // The SDK reading the same span sends the same bytes as the stage does.
-        let class = if fast {
-            "GroupFastSyncRead"
-        } else {
-            "GroupSyncRead"
+        // The SDK reading the same span: GroupSyncRead sends the same bytes as the stage; its
+        // GroupFastSyncRead would send fewer but expects a reply its own buffer cannot hold.
+        let sdk_span = |class: &str| {
+            let name = format!("{class}(70, 66), the span");
+            sdk_reads(41, &REGISTERS)
+                .into_iter()
+                .find(|r| r.name == name)
+                .expect("the span read")
+                .bytes
         };
-        let name = format!("{class}(70, 66), the span");
-        let same = sdk_reads(41, &REGISTERS)
-            .into_iter()
-            .find(|r| r.name == name)
-            .expect("the span read");
-        assert_eq!(same.bytes, span, "{}", same.name);
+        assert_eq!(sdk_span("GroupSyncRead"), span);
+        assert_eq!(sdk_span("GroupFastSyncRead"), 2933);
     }
 }
 
@@ -90,23 +96,28 @@ fn bus_splits_read_at_the_sdk_minimum() {
 }
 
 /// The shortcut the measurements take reads exactly what the devices' own bring-up sets up:
-/// 41 servos with SYNC READ, both layouts, the same bytes per cycle and every value.
+/// 41 servos, both read modes (bring-up's long reads go out as SYNC READ when a combined FAST
+/// reply would not fit one packet), both layouts, the same bytes per cycle and every value.
 #[test]
 fn direct_setup_reads_what_bring_up_reads() {
-    for reading in [Reading::Chosen, Reading::Contiguous] {
-        let managed = measure(
-            41,
-            Dxl2ReadMode::Sync,
-            reading,
-            Setup::BringUp,
-            BAUD,
-            CYCLES,
-        );
-        let direct = measure(41, Dxl2ReadMode::Sync, reading, Setup::Direct, BAUD, CYCLES);
-        assert!(managed.complete(41) && direct.complete(41), "{reading:?}");
-        assert_eq!(managed.layout, direct.layout);
-        assert_eq!(managed.read_bytes, direct.read_bytes, "{reading:?}");
-        assert_eq!(managed.write_bytes, direct.write_bytes, "{reading:?}");
+    for mode in [Dxl2ReadMode::Sync, Dxl2ReadMode::Fast] {
+        for reading in [Reading::Chosen, Reading::Contiguous] {
+            let managed = measure(41, mode, reading, Setup::BringUp, BAUD, CYCLES);
+            let direct = measure(41, mode, reading, Setup::Direct, BAUD, CYCLES);
+            assert!(
+                managed.complete(41) && direct.complete(41),
+                "{mode:?} {reading:?}"
+            );
+            assert_eq!(managed.layout, direct.layout);
+            assert_eq!(
+                managed.read_bytes, direct.read_bytes,
+                "{mode:?} {reading:?}"
+            );
+            assert_eq!(
+                managed.write_bytes, direct.write_bytes,
+                "{mode:?} {reading:?}"
+            );
+        }
     }
 }
 

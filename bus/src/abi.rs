@@ -214,7 +214,7 @@ pub struct ExecutorStats {
     pub setpoints_refused: u64,
     /// Devices of the subsystem.
     pub devices: u32,
-    /// Devices driving (enabled).
+    /// Devices driving (enabled; a simulated device without a lifecycle unless tripped).
     pub devices_enabled: u32,
     /// Devices tripped (watchdog or fault), waiting to be enabled again.
     pub devices_tripped: u32,

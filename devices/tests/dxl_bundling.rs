@@ -277,6 +277,9 @@ fn truth(records: &[ReplyRecord], n: usize) -> Truth {
     t
 }
 
+/// A request's answer: its sample time and value (`None`: stale).
+type Answer = (u64, Option<f64>);
+
 /// 1 % corrupted and 1 % dropped bytes in both directions for `cycles` cycles: no value is
 /// ever wrong (each one delivered equals what the simulator sent for that request), a value is
 /// stale only where the injector damaged its status packet (or its instruction, or, at a packet
@@ -297,7 +300,7 @@ fn fault_run(mode: Dxl2ReadMode, cycles: u64, seed: u64) {
     // Per request (its tick, servo): the sample time and value of each channel. After missing
     // replies the stage keeps the line quiet for a while, so a cycle's requests may be answered
     // by the next cycle's read (their sample time is that read's).
-    let mut got: HashMap<(u64, usize), [Option<(u64, Option<f64>)>; 2]> = HashMap::new();
+    let mut got: HashMap<(u64, usize), [Option<Answer>; 2]> = HashMap::new();
     let mut rng = Rng::new(seed);
     let channels = [x_channel::POSITION, x_channel::VELOCITY];
     let mut stale = 0u64;

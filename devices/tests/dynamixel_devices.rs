@@ -156,3 +156,23 @@ fn protocol_1_servo_speaks_sign_magnitude_and_its_own_addresses() {
     assert_eq!(d.range_rejects(), 1);
     assert_eq!(ops(|o| d.safe(SafeAction::Hold, CTX, o)), [write(24, 1, 0)]);
 }
+
+/// With the indirect layout the hardware_error channel comes back at an Indirect Data address:
+/// its value still sets the device's fault status, in the same reply.
+#[test]
+fn hardware_error_read_through_indirect_data_sets_the_fault() {
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    d.configure_reads(&[x_channel::POSITION, x_channel::HARDWARE_ERROR]);
+    let at = d
+        .read_address(x_channel::HARDWARE_ERROR)
+        .expect("hardware_error is read");
+    assert_ne!(at, 70, "read through Indirect Data");
+    assert_eq!(d.status().fault, 0);
+    // Overload (bit 5).
+    let u = updates(&mut d, &register(at, 1, 0x20));
+    assert_eq!(
+        (u[0].channel, u[0].value),
+        (x_channel::HARDWARE_ERROR, Some(32.0))
+    );
+    assert_eq!(d.status().fault, 0x20);
+}

@@ -952,7 +952,12 @@ impl Stages {
         }
         for d in &self.devices {
             h.devices += 1;
-            h.enabled += u32::from(d.status.phase == Phase::Enabled);
+            // A device without a lifecycle (simulated) drives whenever it is not tripped.
+            h.enabled += u32::from(match d.status.phase {
+                Phase::Enabled => true,
+                Phase::Unmanaged => !d.status.tripped,
+                _ => false,
+            });
             h.tripped += u32::from(d.status.tripped);
             h.faulted += u32::from(d.status.fault != 0);
         }
@@ -1012,7 +1017,7 @@ pub struct Health {
     pub links_down: u32,
     /// Devices.
     pub devices: u32,
-    /// Devices enabled.
+    /// Devices driving: enabled, or without a lifecycle and not tripped.
     pub enabled: u32,
     /// Devices tripped.
     pub tripped: u32,

@@ -396,6 +396,12 @@ fn watchdog_sends_the_safe_action_within_timeout_plus_one_tick() {
         rig.step();
     }
     assert!(!rig.stages.watchdog_tripped());
+    let h = rig.stages.health();
+    assert_eq!(
+        (h.devices, h.enabled, h.tripped),
+        (2, 2, 0),
+        "simulated devices drive"
+    );
     rig.frame(&[(0, 0.5), (1, 0.5)]);
     let applied = rig.tick;
     let mut tripped_at = None;

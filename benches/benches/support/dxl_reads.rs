@@ -297,10 +297,8 @@ pub fn measure(
         let ups = rig.tick(true);
         let s = stats(&rig);
         let k = rig.k - 1;
-        let reads = match mode {
-            Dxl2ReadMode::Sync => s.sync_read - prev.sync_read,
-            Dxl2ReadMode::Fast => s.fast_sync_read - prev.fast_sync_read,
-        };
+        // A FAST read whose combined reply would not fit one packet goes out as SYNC READ.
+        let reads = (s.sync_read + s.fast_sync_read) - (prev.sync_read + prev.fast_sync_read);
         let writes = s.sync_write - prev.sync_write;
         if reads == 0 && rig.link.counters().protocol.missing_replies > missing_before {
             // The stage keeps the line quiet after missing replies (a reply it could not

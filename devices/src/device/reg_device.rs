@@ -835,6 +835,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
             self.set_fault(0, reply.t_sample_ns);
         }
         if let (Some(hw), Some(v)) = (T::HW_ERROR, value) {
+            // The alert's own read of the register (never through the indirect layout).
             if addr == hw && len == 1 {
                 self.set_fault(v as u32 & 0xFF, reply.t_sample_ns);
             }
@@ -851,6 +852,11 @@ impl<T: ControlTable> Device for RegDevice<T> {
                     None
                 }
                 Some(raw) => {
+                    if T::HW_ERROR.is_some() && c.read == T::HW_ERROR && c.read != Some(addr) {
+                        // The hardware_error channel sampled through Indirect Data (read
+                        // directly, it was taken above).
+                        self.set_fault(raw as u32 & 0xFF, reply.t_sample_ns);
+                    }
                     self.last[i] = Some(raw);
                     self.family.on_raw(&mut self.table, i, raw);
                     Some(c.to_units(raw))

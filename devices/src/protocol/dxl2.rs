@@ -23,12 +23,16 @@ pub enum Dxl2ReadMode {
     Fast,
 }
 
-/// Largest packet the stage builds or accepts.
+/// Largest packet the stage builds, and the largest combined FAST reply it asks for (before
+/// byte stuffing): the DynamixelSDK's limit too.
 const MAX_PACKET: usize = 1024;
+/// Largest packet the stage receives: a [`MAX_PACKET`] reply with worst-case byte stuffing
+/// (one 0xFD added per three bytes).
+const MAX_RECEIVED: usize = MAX_PACKET + MAX_PACKET / 3 + 1;
 
 /// Dynamixel 2.0 protocol stage. Word = byte.
 pub struct Dxl2Protocol {
-    stage: Stage<Dxl2, MAX_PACKET>,
+    stage: Stage<Dxl2, MAX_RECEIVED>,
 }
 
 impl std::fmt::Debug for Dxl2Protocol {
@@ -87,6 +91,20 @@ impl Dxl2Protocol {
     }
 }
 
+/// Bytes (before stuffing) of the combined status packet of a FAST SYNC / FAST BULK READ
+/// whose servos read `lens` bytes each: a slice (ERR, ID, data, CRC) per servo, plus header,
+/// ID, LEN and INST.
+pub fn fast_reply_len(lens: impl IntoIterator<Item = usize>) -> usize {
+    8 + lens.into_iter().map(|l| 4 + l).sum::<usize>()
+}
+
+/// Whether a FAST read of `lens` gets its combined reply: at most [`MAX_PACKET`] bytes (before
+/// stuffing, which [`MAX_RECEIVED`] leaves room for). Otherwise the stage reads with SYNC /
+/// BULK READ, one status packet per servo.
+pub fn fast_read_fits(lens: impl IntoIterator<Item = usize>) -> bool {
+    fast_reply_len(lens) <= MAX_PACKET
+}
+
 /// Interprets a 2.0 error byte.
 fn status_err(e: dxl::ErrorByte) -> StatusErr {
     StatusErr {
@@ -119,7 +137,11 @@ impl Dialect for Dxl2 {
     }
 
     fn read(&mut self, buf: &mut [u8], entries: &[Entry], shape: ReadShape) -> Option<ReadTxn> {
-        let fast = self.mode == Dxl2ReadMode::Fast;
+        // A combined reply longer than the packet buffer could never be received (nor by the
+        // DynamixelSDK, whose buffer is the same 1 KiB): such a read goes out as SYNC/BULK READ,
+        // one status packet per servo, which always fits.
+        let fast = self.mode == Dxl2ReadMode::Fast
+            && fast_read_fits(entries.iter().map(|e| e.len as usize));
         if let ReadShape::Ping | ReadShape::Reboot = shape {
             let e = entries.first()?;
             let (bytes, data) = match shape {
@@ -160,9 +182,7 @@ impl Dialect for Dxl2 {
         }
         .ok()?;
         let (reply_bytes, replies) = if fast {
-            // Each slice: ERR ID DATA CRC; plus header, ID, LEN, INST.
-            let slices: usize = entries.iter().map(|e| 4 + e.len as usize).sum();
-            (8 + slices, 1)
+            (fast_reply_len(entries.iter().map(|e| e.len as usize)), 1)
         } else {
             let packets = entries.iter().map(|e| dxl::status_len(e.len as usize));
             (packets.sum(), entries.len())
@@ -313,5 +333,26 @@ mod tests {
         p.expire(&mut replies, ctx(1));
         assert_eq!(replies.len(), 1);
         assert_eq!(p.counters().dropped_requests, 2);
+    }
+
+    /// A FAST read whose combined reply could not be received goes out as SYNC READ (one
+    /// status packet per servo); one that fits stays FAST.
+    #[test]
+    fn a_fast_read_too_long_for_one_reply_goes_out_as_sync_read() {
+        let instruction = |len: u8| {
+            let mut p = Dxl2Protocol::new(timing(), Dxl2ReadMode::Fast, 41, 64);
+            let mut out = Bounded::with_capacity(4096);
+            let reads: Vec<Request> = (1..=41)
+                .map(|id| req(id, Op::Read { addr: 70, len }, 0))
+                .collect();
+            p.encode(&reads, &mut out, ctx(0));
+            let mut buf = out.as_slice().to_vec();
+            let pk = conductor_protocols::dynamixel2::parse_in_place(&mut buf).unwrap();
+            (pk.instruction, pk.params.len())
+        };
+        // 8 + 41 · (4 + 11) = 623 bytes: FAST SYNC READ.
+        assert_eq!(instruction(11), (0x8A, 4 + 41));
+        // 8 + 41 · (4 + 66) = 2878 bytes: SYNC READ of the same span from the same servos.
+        assert_eq!(instruction(66), (0x82, 4 + 41));
     }
 }

@@ -21,5 +21,5 @@ pub use can::{
     mit_limits, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError, MIT_MODELS,
 };
 pub use dxl1::{Dxl1Protocol, Dxl1ReadMode};
-pub use dxl2::{Dxl2Protocol, Dxl2ReadMode};
+pub use dxl2::{fast_read_fits, fast_reply_len, Dxl2Protocol, Dxl2ReadMode};
 pub use register::{wire_ns, Timing};

@@ -39,6 +39,7 @@
 //! * **Simulated** protocols (`sim`) have no wire; unknown kinds no model: no load.
 
 use conductor_devices::device::{Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX, RegChannel};
+use conductor_devices::protocol;
 use conductor_devices::Device as _;
 
 use super::Subsystem;
@@ -184,12 +185,10 @@ fn dxl2_sync_write(n: usize, len: usize) -> usize {
 fn dxl2_status(len: usize) -> usize {
     11 + len
 }
-/// Dynamixel 2.0 FAST read reply: one packet, a slice (ERR, ID, data, CRC) per servo. The same
-/// formula as the reply the Dynamixel 2.0 protocol stage waits for
-/// (`conductor_devices::protocol::Dxl2Protocol`, `reply_bytes`); kept in step by a test against
-/// the encoder.
+/// Dynamixel 2.0 FAST read reply: one packet, a slice (ERR, ID, data, CRC) per servo: what the
+/// protocol stage waits for; checked against the encoder by a test.
 fn dxl2_fast_reply(lens: &[usize]) -> usize {
-    8 + lens.iter().map(|l| 4 + l).sum::<usize>()
+    protocol::fast_reply_len(lens.iter().copied())
 }
 /// Dynamixel 1.0 SYNC WRITE: LEN = (L + 1)·N + 4, plus FF FF ID LEN.
 fn dxl1_sync_write(n: usize, len: usize) -> usize {
@@ -395,6 +394,9 @@ impl Bus<'_> {
                         cy.wait("return delay", n, 0, n as f64 * delay);
                     }
                     Proto::Dxl2 { fast } => {
+                        // As the stage does: a combined reply too long for one packet is
+                        // read with SYNC / BULK READ instead.
+                        let fast = fast && protocol::fast_read_fits(lens.iter().copied());
                         let (what, size) = match (uniform, fast) {
                             (true, false) => ("SYNC READ", dxl2_sync_read(n)),
                             (true, true) => ("FAST SYNC READ", dxl2_sync_read(n)),
@@ -803,6 +805,28 @@ mod tests {
         // With SYNC READ, six status packets wait six return delays: 1.54 + 0.12 ms → 41.5 %.
         let l = load(&dxl_bus(6, "return_delay_us = 20", POSITION), 0);
         assert!(close(l.fraction(), 0.415), "{}", l.fraction());
+    }
+
+    /// 150 servos reading their positions with `read = "fast_sync"`: a combined reply of
+    /// 8 + 150·8 = 1208 B would not fit one packet, so the stage (and this estimate) reads with
+    /// SYNC READ: 14 + 150 B, 150 status packets of 15 B.
+    #[test]
+    fn a_fast_read_too_long_for_one_packet_is_counted_as_sync_read() {
+        let text =
+            dxl_bus(150, "read = \"fast_sync\"", POSITION).replace("rate_hz = 250", "rate_hz = 10");
+        let l = load(&text, 0);
+        let parts = sizes(&l.busiest);
+        assert!(parts.contains(&("SYNC READ", 1, 164)), "{parts:?}");
+        assert!(parts.contains(&("status packet", 150, 2250)), "{parts:?}");
+        // 64 servos still fit one combined reply: 8 + 64·8 = 520 B.
+        let text =
+            dxl_bus(64, "read = \"fast_sync\"", POSITION).replace("rate_hz = 250", "rate_hz = 10");
+        let l = load(&text, 0);
+        let parts = sizes(&l.busiest);
+        assert!(
+            parts.contains(&("combined status packet", 1, 520)),
+            "{parts:?}"
+        );
     }
 
     /// Servo 1 also reads its velocity (128..132): it reads the span 128..136 (8 B), the others
