@@ -70,9 +70,6 @@ impl SocketCanHardware {
     }
 }
 
-/// The interface vanished (`ENODEV`, `ENXIO`: a USB-CAN adapter unplugged, the interface
-/// deleted) or went down (`ENETDOWN`): a disconnection, reopened by the link; anything else is
-/// an I/O error. OS errors carry their number; io::Error builds no text for them.
 /// Whether interface `name` exists and is up (`IFF_UP` in `/sys/class/net/<name>/flags`).
 pub fn interface_up(name: &str) -> bool {
     let path = format!("/sys/class/net/{name}/flags");
@@ -82,6 +79,9 @@ pub fn interface_up(name: &str) -> bool {
         .is_some_and(|flags| flags & libc::IFF_UP as u32 != 0)
 }
 
+/// The interface vanished (`ENODEV`, `ENXIO`: a USB-CAN adapter unplugged, the interface
+/// deleted) or went down (`ENETDOWN`): a disconnection, reopened by the link; anything else is
+/// an I/O error. OS errors carry their number; io::Error builds no text for them.
 fn hw_error(e: io::Error) -> HwError {
     let errno = Errno::from_raw(e.raw_os_error().unwrap_or(libc::EIO));
     match errno {
