@@ -78,11 +78,19 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
             assert_eq!(servo.present_position(), 2048, "servo {id}: nothing moved");
         }
     }
-    let log = exec.log();
-    assert_eq!(
+    // Each servo's bring-up is reported (stderr is read by another thread than READY: wait).
+    let enabled = |log: &[String]| {
         log.iter()
             .filter(|l| l.contains("is enabled") && l.contains("xm430-w350 (model 1020)"))
-            .count(),
+            .count()
+    };
+    let end = Instant::now() + Duration::from_secs(2);
+    while enabled(&exec.log()) < 6 && Instant::now() < end {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let log = exec.log();
+    assert_eq!(
+        enabled(&log),
         6,
         "each servo's bring-up is reported: {log:#?}"
     );
@@ -184,14 +192,46 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
         "{:#?}",
         exec.log()
     );
-    let s = sim.sim();
-    for (id, v) in (1..=6u8).zip(targets) {
-        let servo = s.servo(id).unwrap();
-        assert!(servo.torque_on(), "hold keeps torque on");
-        let raw = (v / (2.0 * std::f64::consts::PI / 4096.0)).round() as i32 + 2048;
+    {
+        let s = sim.sim();
+        for (id, v) in (1..=6u8).zip(targets) {
+            let servo = s.servo(id).unwrap();
+            assert!(servo.torque_on(), "hold keeps torque on");
+            let raw = (v / (2.0 * std::f64::consts::PI / 4096.0)).round() as i32 + 2048;
+            assert!(
+                (servo.goal_position() - raw).abs() <= 3,
+                "holds where it is"
+            );
+        }
+    }
+    // An independent witness: ROBOTIS' DynamixelSDK opens the same port after the executor
+    // exited and reads what each servo holds: torque on, no error, its goal where it is.
+    let script = conductor_testkit::workspace().join("devices/tests/python/dxl_sdk_state.py");
+    let out = std::process::Command::new(conductor_testkit::python())
+        .arg(&script)
+        .arg(&port)
+        .arg("1,2,3,4,5,6")
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows: Vec<Vec<i64>> = text
+        .lines()
+        .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 6, "{text}");
+    for (row, id) in rows.iter().zip(1..) {
+        let [rid, torque, hw, goal, present] = row[..] else {
+            panic!("{text}")
+        };
+        assert_eq!((rid, torque, hw), (id, 1, 0), "servo {id}: {text}");
         assert!(
-            (servo.goal_position() - raw).abs() <= 3,
-            "holds where it is"
+            (goal - present).abs() <= 3,
+            "servo {id} holds where it is: {text}"
         );
     }
     let _ = std::fs::remove_file(&manifest);

@@ -36,6 +36,8 @@ pub fn shipped(name: &str, replace: &[(&str, &str)]) -> PathBuf {
 pub struct Exec {
     child: Child,
     lines: Arc<Mutex<Vec<String>>>,
+    /// The stderr reader: it ends at the executor's exit (end of file).
+    reader: Option<std::thread::JoinHandle<()>>,
     status: Option<ExitStatus>,
 }
 
@@ -64,7 +66,7 @@ impl Exec {
         let lines = Arc::new(Mutex::new(Vec::new()));
         let err = BufReader::new(child.stderr.take().unwrap());
         let l2 = lines.clone();
-        std::thread::spawn(move || {
+        let reader = std::thread::spawn(move || {
             for line in err.lines().map_while(Result::ok) {
                 eprintln!("{line}");
                 l2.lock().unwrap().push(line);
@@ -76,8 +78,7 @@ impl Exec {
             line.clear();
             if out.read_line(&mut line).unwrap_or(0) == 0 {
                 let status = child.wait().unwrap();
-                // Let the stderr thread take the last lines.
-                std::thread::sleep(Duration::from_millis(100));
+                let _ = reader.join();
                 let log = lines.lock().unwrap().clone();
                 return Err((status, log));
             }
@@ -88,6 +89,7 @@ impl Exec {
         Ok(Exec {
             child,
             lines,
+            reader: Some(reader),
             status: None,
         })
     }
@@ -102,7 +104,10 @@ impl Exec {
             nix::sys::signal::Signal::SIGTERM,
         );
         let s = self.child.wait().unwrap();
-        std::thread::sleep(Duration::from_millis(100));
+        // Every line it wrote: the reader ends at end of file.
+        if let Some(r) = self.reader.take() {
+            let _ = r.join();
+        }
         self.status = Some(s);
         s
     }
