@@ -19,10 +19,7 @@
 //! ranges are set in the motor's own menu): bring-up checks that the motor answers. A fault code
 //! (8-byte replies of newer firmware) trips it.
 
-use crate::lifecycle::{
-    DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES,
-    SAFE_RETRY_NS, STEP_TRIES,
-};
+use crate::lifecycle::{DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup};
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
 use crate::stage::{Channel, Device, SafeAction, TickCtx};
@@ -69,15 +66,6 @@ struct Target {
     t: f32,
 }
 
-/// Where a lifecycle should end.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Goal {
-    Drive,
-    /// Tripped: hold the position (or damp) with this command, refusing setpoints.
-    Hold,
-    Limp,
-}
-
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Step {
     None,
@@ -85,6 +73,12 @@ enum Step {
     Enable,
     /// A safe action, waiting for the motor's answer to it.
     Safe,
+}
+
+impl LifeStep for Step {
+    const NONE: Self = Step::None;
+    const PROBE: Self = Step::Probe;
+    const SAFE: Self = Step::Safe;
 }
 
 /// An MIT-mode motor.
@@ -110,16 +104,9 @@ pub struct MitMotor {
     temperature: Option<u8>,
     fault_tick: Option<u64>,
     faults: u64,
-    // Lifecycle.
-    status: DeviceStatus,
-    startup: Startup,
-    goal: Goal,
-    user_off: bool,
-    resume_on: bool,
-    step: Step,
-    sent: bool,
-    tries: u8,
-    next_try_ns: u64,
+    /// Lifecycle (a hold goal holds the position, or damps, with `safe_cmd`, refusing
+    /// setpoints).
+    life: Lifecycle<Step>,
     /// The request whose answer completes the step.
     awaiting: Option<Op>,
     /// The command a safe action sends (re-sent every tick while tripped in motor mode).
@@ -148,15 +135,7 @@ impl MitMotor {
             temperature: None,
             fault_tick: None,
             faults: 0,
-            status: DeviceStatus::UNMANAGED,
-            startup: Startup::Enable,
-            goal: Goal::Limp,
-            user_off: false,
-            resume_on: false,
-            step: Step::None,
-            sent: false,
-            tries: 0,
-            next_try_ns: 0,
+            life: Lifecycle::new(),
             awaiting: None,
             safe_cmd: None,
         }
@@ -171,7 +150,7 @@ impl MitMotor {
     }
 
     fn managed(&self) -> bool {
-        self.status.phase != Phase::Unmanaged
+        self.life.managed()
     }
 
     fn push(&self, op: Op, ctx: TickCtx, out: &mut Bounded<Request>) {
@@ -204,22 +183,20 @@ impl MitMotor {
     }
 
     fn go(&mut self, step: Step) {
-        self.step = step;
-        self.sent = false;
-        self.tries = 0;
+        self.life.go(step);
         self.awaiting = None;
     }
 
     fn driving(&self) -> bool {
-        matches!(self.status.phase, Phase::Enabled | Phase::Unmanaged)
+        matches!(self.life.status.phase, Phase::Enabled | Phase::Unmanaged)
     }
 
     /// Lifecycle requests of this tick; true if a frame went out.
     fn drive(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) -> bool {
-        if !self.managed() || self.sent || ctx.now_ns < self.next_try_ns {
+        if !self.managed() || self.life.sent || ctx.now_ns < self.life.next_try_ns {
             return false;
         }
-        match self.step {
+        match self.life.step {
             Step::None => return false,
             Step::Probe => {
                 let op = Op::MitSpecial(MitSpecial::Exit);
@@ -248,83 +225,53 @@ impl MitMotor {
                 self.push(op, ctx, out);
             }
         }
-        self.sent = true;
+        self.life.sent = true;
         self.dirty = false;
         true
     }
 
     fn retry(&mut self, now_ns: u64) {
-        self.tries = self.tries.saturating_add(1);
-        let (limit, spacing) = match self.step {
-            Step::Probe => (PROBE_TRIES, PROBE_SPACING_NS),
-            // A safe action is sent again until it is confirmed; the executor bounds the wait.
-            Step::Safe => (u8::MAX, SAFE_RETRY_NS),
-            _ => (STEP_TRIES, 0),
-        };
-        if self.tries < limit {
-            self.sent = false;
-            self.next_try_ns = now_ns + spacing;
+        if !self.life.retry_exhausted(now_ns) {
             return;
         }
-        match self.step {
-            Step::Probe => {
-                self.status.failure = Some(Failure::NoAnswer);
-                self.status.phase = Phase::Failed;
-            }
+        match self.life.step {
+            Step::Probe => self.life.fail(Failure::NoAnswer),
             Step::Enable => {
-                self.status.failure = Some(Failure::EnableRefused);
-                self.status.phase = Phase::Disabled;
-                self.goal = Goal::Limp;
+                self.life.refuse_enable();
                 self.enabled = false;
             }
-            Step::Safe | Step::None => {}
+            // The action stays unconfirmed: the executor reports it.
+            Step::Safe | Step::None => self.life.step = Step::None,
         }
-        self.step = Step::None;
     }
 
     /// The answer to the step's request arrived.
     fn step_done(&mut self) {
-        match self.step {
+        match self.life.step {
             Step::Probe => {
-                if self.goal == Goal::Limp {
-                    self.status.phase = Phase::Disabled;
-                    self.step = Step::None;
-                    if self.status.tripped {
-                        self.status.safe = SafeProgress::Confirmed;
-                    }
+                if self.life.goal == Goal::Limp {
+                    self.life.settle_limp();
                 } else {
-                    self.status.phase = Phase::Enabling;
+                    self.life.status.phase = Phase::Enabling;
                     self.go(Step::Enable);
                 }
             }
             Step::Enable => {
-                if self.status.fault != 0 {
+                if self.life.status.fault != 0 {
                     // A faulted motor does not enter motor mode.
-                    self.status.failure = Some(Failure::EnableRefused);
-                    self.status.phase = Phase::Disabled;
-                    self.goal = Goal::Limp;
+                    self.life.refuse_enable();
                     self.enabled = false;
-                } else if self.goal == Goal::Hold {
-                    self.status.phase = Phase::Holding;
-                    self.status.safe = SafeProgress::Confirmed;
                 } else {
-                    self.status.phase = Phase::Enabled;
-                    self.status.failure = None;
-                    self.status.tripped = false;
-                    self.status.safe = SafeProgress::None;
+                    self.life.switched_on();
                 }
-                self.step = Step::None;
             }
-            Step::Safe => {
-                self.status.safe = SafeProgress::Confirmed;
-                self.step = Step::None;
-            }
+            Step::Safe => self.life.safe_confirmed(),
             Step::None => {}
         }
     }
 
     fn life_reply(&mut self, reply: &Reply) {
-        if !self.managed() || self.step == Step::None {
+        if !self.managed() || self.life.step == Step::None {
             return;
         }
         let Some(want) = self.awaiting else { return };
@@ -334,29 +281,29 @@ impl MitMotor {
         match reply.data {
             ReplyData::Mit { .. } => self.step_done(),
             // Late: it did get the frame (a lagging adapter); enough to confirm a safe action.
-            ReplyData::Late { .. } if self.step == Step::Safe => self.step_done(),
+            ReplyData::Late { .. } if self.life.step == Step::Safe => self.step_done(),
             ReplyData::Missing { .. } => self.retry(reply.t_sample_ns),
             _ => {}
         }
     }
 
     fn start_enable(&mut self) {
-        self.goal = Goal::Drive;
-        self.user_off = false;
+        self.life.goal = Goal::Drive;
+        self.life.user_off = false;
         self.dirty = false;
         self.safe_cmd = None;
-        self.status.phase = Phase::Enabling;
+        self.life.status.phase = Phase::Enabling;
         // Where it is now, never a target from before: poll first, then enter and hold there.
         self.go(Step::Probe);
-        self.status.phase = Phase::Enabling;
+        self.life.status.phase = Phase::Enabling;
     }
 
     fn start_disable(&mut self) {
-        self.goal = Goal::Limp;
-        self.user_off = true;
+        self.life.goal = Goal::Limp;
+        self.life.user_off = true;
         self.dirty = false;
         self.safe_cmd = None;
-        self.status.phase = Phase::Disabled;
+        self.life.status.phase = Phase::Disabled;
         self.go(Step::Probe);
     }
 }
@@ -392,7 +339,7 @@ impl Device for MitMotor {
                 return;
             }
             if value >= 0.5 {
-                if !matches!(self.status.phase, Phase::Enabled | Phase::Enabling) {
+                if !matches!(self.life.status.phase, Phase::Enabled | Phase::Enabling) {
                     self.start_enable();
                 }
             } else {
@@ -403,7 +350,7 @@ impl Device for MitMotor {
         if !self.accepts(channel) {
             return;
         }
-        if self.status.phase == Phase::Disabled {
+        if self.life.status.phase == Phase::Disabled {
             // A hold-off motor's first setpoint: enable from where it is, then apply it.
             self.start_enable();
         }
@@ -432,7 +379,7 @@ impl Device for MitMotor {
             if self.drive(ctx, out) {
                 return;
             }
-            match self.status.phase {
+            match self.life.status.phase {
                 Phase::Enabled => {}
                 Phase::Holding => {
                     // Keep holding (and feeding the motor's CAN timeout).
@@ -488,7 +435,7 @@ impl Device for MitMotor {
                     self.temperature = temperature;
                     if self.fault_tick != Some(reply.tick) {
                         // A long reply without a fault code: the fault has cleared.
-                        self.status.fault = 0;
+                        self.life.status.fault = 0;
                     }
                 }
                 Some([p as f64, v as f64, t as f64])
@@ -502,7 +449,7 @@ impl Device for MitMotor {
             ReplyData::DeviceError { code } => {
                 self.faults += 1;
                 self.fault_tick = Some(reply.tick);
-                self.status.fault = code;
+                self.life.status.fault = code;
                 return;
             }
             _ => return,
@@ -527,16 +474,10 @@ impl Device for MitMotor {
 
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
         let managed = self.managed();
-        let up = matches!(
-            self.status.phase,
-            Phase::Enabled | Phase::Enabling | Phase::Holding | Phase::Disabled | Phase::Unmanaged
-        );
         self.dirty = false;
         if managed {
             self.go(Step::Safe);
-            self.status.safe = SafeProgress::Pending;
-            if !up {
-                self.step = Step::None;
+            if !self.life.begin_safe() {
                 return;
             }
         }
@@ -548,9 +489,9 @@ impl Device for MitMotor {
             }
             SafeAction::TorqueOff => {
                 self.enabled = false;
-                self.goal = Goal::Limp;
+                self.life.goal = Goal::Limp;
                 if managed {
-                    self.status.phase = Phase::Disabled;
+                    self.life.status.phase = Phase::Disabled;
                 }
                 Op::MitSpecial(MitSpecial::Exit)
             }
@@ -583,53 +524,33 @@ impl Device for MitMotor {
         self.push(op, ctx, out);
         if managed {
             self.awaiting = Some(op);
-            self.sent = true;
+            self.life.sent = true;
             if matches!(op, Op::Mit { .. }) {
                 self.safe_cmd = Some(op);
-                self.status.phase = Phase::Holding;
-                if self.status.tripped {
-                    self.goal = Goal::Hold;
+                self.life.status.phase = Phase::Holding;
+                if self.life.status.tripped {
+                    self.life.goal = Goal::Hold;
                 }
             }
         }
     }
 
     fn status(&self) -> DeviceStatus {
-        self.status
+        self.life.status
     }
 
     fn bring_up(&mut self, startup: Startup, _ctx: TickCtx) {
-        let tripped = self.status.tripped;
-        self.startup = startup;
-        self.goal = if self.resume_on || (startup == Startup::Enable && !self.user_off && !tripped)
-        {
-            Goal::Drive
-        } else if tripped && self.goal == Goal::Hold {
-            Goal::Hold
-        } else {
-            Goal::Limp
-        };
-        self.status = DeviceStatus {
-            tripped,
-            fault: self.status.fault,
-            ..DeviceStatus::probing()
-        };
+        self.life.bring_up(startup);
         self.enabled = false;
         self.commanded = false;
         self.go(Step::Probe);
-        self.next_try_ns = 0;
     }
 
     fn bus_lost(&mut self) {
         if !self.managed() {
             return;
         }
-        self.resume_on = matches!(self.status.phase, Phase::Enabled | Phase::Enabling);
-        self.status.phase = Phase::Offline;
-        if self.status.safe == SafeProgress::Pending {
-            self.status.safe = SafeProgress::None;
-        }
-        self.step = Step::None;
+        self.life.bus_lost();
         self.dirty = false;
     }
 
@@ -640,21 +561,11 @@ impl Device for MitMotor {
         if !CHANNELS.get(channel).is_some_and(|c| c.writable) {
             return false;
         }
-        match self.status.phase {
-            Phase::Unmanaged | Phase::Enabled => true,
-            Phase::Disabled => {
-                self.startup == Startup::HoldOff && !self.status.tripped && !self.user_off
-            }
-            _ => false,
-        }
+        self.life.accepts_setpoints()
     }
 
     fn trip(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.resume_on = false;
-        if self.managed() {
-            self.status.tripped = true;
-        }
-        self.goal = Goal::Limp;
+        self.life.begin_trip();
         self.safe(action, ctx, out);
     }
 
@@ -666,7 +577,7 @@ impl Device for MitMotor {
                 mit_channel::ENABLE,
                 (self.enabled && self.driving()) as u8 as f64,
             ),
-            (mit_channel::FAULT, self.status.fault as f64),
+            (mit_channel::FAULT, self.life.status.fault as f64),
         ];
         for (ch, v) in local {
             if self.sampled & (1 << ch) != 0 {

@@ -24,7 +24,7 @@ use std::f64::consts::TAU;
 use conductor_protocols::odrive_can::{axis_state, control_mode, input_mode, CmdId, Message};
 
 use crate::lifecycle::{
-    DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES,
+    DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, PROBE_TRIES,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::protocol::odrive_get;
@@ -68,14 +68,6 @@ const CHANNELS: [Channel; 9] = [
 /// Polls of the heartbeat, one per tick, while waiting for the axis to enter closed loop.
 const CONFIRM_POLLS: u8 = 50;
 
-/// Where a lifecycle should end.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Goal {
-    Drive,
-    Hold,
-    Limp,
-}
-
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Step {
     None,
@@ -89,6 +81,12 @@ enum Step {
     Idle,
     /// A safe action: heartbeats until the axis shows it.
     Safe,
+}
+
+impl LifeStep for Step {
+    const NONE: Self = Step::None;
+    const PROBE: Self = Step::Probe;
+    const SAFE: Self = Step::Safe;
 }
 
 /// Which input the axis's controller takes.
@@ -135,16 +133,7 @@ pub struct OdriveAxis {
     report_enable: bool,
     /// Unmanaged: closed loop (or idle) asked for through the `enable` channel.
     raw_enable: Option<bool>,
-    // Lifecycle.
-    status: DeviceStatus,
-    startup: Startup,
-    goal: Goal,
-    user_off: bool,
-    resume_on: bool,
-    step: Step,
-    sent: bool,
-    tries: u8,
-    next_try_ns: u64,
+    life: Lifecycle<Step>,
     /// The state the axis must report to complete the step.
     want_state: u32,
     /// The safe action's setpoint (re-sent while holding).
@@ -169,28 +158,14 @@ impl OdriveAxis {
             fault_tick: None,
             report_enable: false,
             raw_enable: None,
-            status: DeviceStatus::UNMANAGED,
-            startup: Startup::Enable,
-            goal: Goal::Limp,
-            user_off: false,
-            resume_on: false,
-            step: Step::None,
-            sent: false,
-            tries: 0,
-            next_try_ns: 0,
+            life: Lifecycle::new(),
             want_state: 0,
             safe_msg: None,
         }
     }
 
     fn managed(&self) -> bool {
-        self.status.phase != Phase::Unmanaged
-    }
-
-    fn go(&mut self, step: Step) {
-        self.step = step;
-        self.sent = false;
-        self.tries = 0;
+        self.life.managed()
     }
 
     fn control_mode(&self) -> u32 {
@@ -217,10 +192,10 @@ impl OdriveAxis {
 
     /// Lifecycle requests of this tick.
     fn drive(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
-        if !self.managed() || self.sent || ctx.now_ns < self.next_try_ns {
+        if !self.managed() || self.life.sent || ctx.now_ns < self.life.next_try_ns {
             return;
         }
-        match self.step {
+        match self.life.step {
             Step::None => return,
             Step::Probe => self.heartbeat(ctx, out),
             Step::Align => {
@@ -236,8 +211,8 @@ impl OdriveAxis {
                     self.push(m, ctx, out);
                 }
             }
-            Step::Enable if self.tries == 0 => {
-                if self.status.fault != 0 {
+            Step::Enable if self.life.tries == 0 => {
+                if self.life.status.fault != 0 {
                     self.push(Message::ClearErrors { identify: 0 }, ctx, out);
                 }
                 let input = self.hold_input(self.last_pos.unwrap_or(0.0));
@@ -252,7 +227,7 @@ impl OdriveAxis {
                 self.want_state = axis_state::CLOSED_LOOP_CONTROL;
                 self.heartbeat(ctx, out);
             }
-            Step::Idle if self.tries == 0 => {
+            Step::Idle if self.life.tries == 0 => {
                 self.push(
                     Message::SetAxisState {
                         requested_state: axis_state::IDLE,
@@ -265,29 +240,29 @@ impl OdriveAxis {
             }
             Step::Enable | Step::Idle | Step::Safe => self.heartbeat(ctx, out),
         }
-        self.sent = true;
+        self.life.sent = true;
     }
 
     /// A heartbeat (asked or cyclic) arrived.
     fn on_heartbeat(&mut self, state: u32, error: u32) {
         self.axis = Some((state, error));
         if self.managed() {
-            self.status.fault = error;
+            self.life.status.fault = error;
         }
-        match self.step {
+        match self.life.step {
             Step::Probe => {
-                if self.goal == Goal::Limp {
+                if self.life.goal == Goal::Limp {
                     if state == axis_state::IDLE {
-                        self.settle_limp();
+                        self.life.settle_limp();
                     } else {
-                        self.go(Step::Idle);
+                        self.life.go(Step::Idle);
                     }
                 } else {
-                    self.status.phase = Phase::Configuring;
-                    self.go(Step::Align);
+                    self.life.status.phase = Phase::Configuring;
+                    self.life.go(Step::Align);
                 }
             }
-            Step::Enable | Step::Idle | Step::Safe if self.sent => {
+            Step::Enable | Step::Idle | Step::Safe if self.life.sent => {
                 if state == self.want_state && (error == 0 || self.want_state == axis_state::IDLE) {
                     self.confirmed();
                 } else {
@@ -298,73 +273,43 @@ impl OdriveAxis {
         }
     }
 
-    fn settle_limp(&mut self) {
-        self.status.phase = Phase::Disabled;
-        self.step = Step::None;
-        if self.status.tripped {
-            self.status.safe = SafeProgress::Confirmed;
-        }
-    }
-
     fn confirmed(&mut self) {
-        match self.step {
-            Step::Enable => {
-                if self.goal == Goal::Hold {
-                    self.status.phase = Phase::Holding;
-                    self.status.safe = SafeProgress::Confirmed;
-                } else {
-                    self.status.phase = Phase::Enabled;
-                    self.status.failure = None;
-                    self.status.tripped = false;
-                    self.status.safe = SafeProgress::None;
-                }
-                self.step = Step::None;
-            }
-            Step::Idle => self.settle_limp(),
-            Step::Safe => {
-                self.status.safe = SafeProgress::Confirmed;
-                self.step = Step::None;
-            }
+        match self.life.step {
+            Step::Enable => self.life.switched_on(),
+            Step::Idle => self.life.settle_limp(),
+            Step::Safe => self.life.safe_confirmed(),
             _ => {}
         }
     }
 
     /// The axis is not there yet: ask again next tick, up to a bound.
     fn poll_again(&mut self) {
-        self.tries = self.tries.saturating_add(1);
-        self.sent = false;
+        self.life.tries = self.life.tries.saturating_add(1);
+        self.life.sent = false;
         // A safe action is watched until it shows; the executor bounds the wait.
-        if self.tries >= CONFIRM_POLLS && self.step != Step::Safe {
-            // Any other action stays unconfirmed.
-            if self.step == Step::Enable {
-                self.status.failure = Some(Failure::EnableRefused);
-                self.status.phase = Phase::Disabled;
-                self.goal = Goal::Limp;
+        if self.life.tries >= CONFIRM_POLLS && self.life.step != Step::Safe {
+            if self.life.step == Step::Enable {
+                self.life.refuse_enable();
+            } else {
+                // Any other action stays unconfirmed.
+                self.life.step = Step::None;
             }
-            self.step = Step::None;
         }
     }
 
     fn missing(&mut self, now_ns: u64) {
-        match self.step {
+        match self.life.step {
             Step::Probe => {
-                self.tries += 1;
-                if self.tries >= PROBE_TRIES {
-                    self.status.failure = Some(Failure::NoAnswer);
-                    self.status.phase = Phase::Failed;
-                    self.step = Step::None;
-                } else {
-                    self.sent = false;
-                    self.next_try_ns = now_ns + PROBE_SPACING_NS;
+                if self.life.retry_exhausted(now_ns) {
+                    self.life.fail(Failure::NoAnswer);
                 }
             }
             Step::Align => {
-                self.tries += 1;
-                self.sent = false;
-                if self.tries >= PROBE_TRIES {
-                    self.status.failure = Some(Failure::NoAnswer);
-                    self.status.phase = Phase::Failed;
-                    self.step = Step::None;
+                // Asked again at once, as many times as a probe.
+                self.life.tries += 1;
+                self.life.sent = false;
+                if self.life.tries >= PROBE_TRIES {
+                    self.life.fail(Failure::NoAnswer);
                 }
             }
             Step::Enable | Step::Idle | Step::Safe => self.poll_again(),
@@ -373,22 +318,22 @@ impl OdriveAxis {
     }
 
     fn start_enable(&mut self) {
-        self.goal = Goal::Drive;
-        self.user_off = false;
+        self.life.goal = Goal::Drive;
+        self.life.user_off = false;
         self.dirty = false;
         self.safe_msg = None;
-        self.status.phase = Phase::Enabling;
+        self.life.status.phase = Phase::Enabling;
         // Where it is now, never a target from before.
-        self.go(Step::Align);
+        self.life.go(Step::Align);
     }
 
     fn start_disable(&mut self) {
-        self.goal = Goal::Limp;
-        self.user_off = true;
+        self.life.goal = Goal::Limp;
+        self.life.user_off = true;
         self.dirty = false;
         self.safe_msg = None;
-        self.status.phase = Phase::Disabled;
-        self.go(Step::Idle);
+        self.life.status.phase = Phase::Disabled;
+        self.life.go(Step::Idle);
     }
 
     /// The safe action this kind declares: idle the axis.
@@ -443,7 +388,7 @@ impl Device for OdriveAxis {
             return;
         }
         let absent = matches!(
-            self.status.phase,
+            self.life.status.phase,
             Phase::Offline | Phase::Probing | Phase::Failed
         );
         if !self.poll || absent {
@@ -474,7 +419,7 @@ impl Device for OdriveAxis {
                 return;
             }
             if value >= 0.5 {
-                if !matches!(self.status.phase, Phase::Enabled | Phase::Enabling) {
+                if !matches!(self.life.status.phase, Phase::Enabled | Phase::Enabling) {
                     self.start_enable();
                 }
             } else {
@@ -485,7 +430,7 @@ impl Device for OdriveAxis {
         if !self.accepts(channel) {
             return;
         }
-        if self.status.phase == Phase::Disabled {
+        if self.life.status.phase == Phase::Disabled {
             // A hold-off axis's first setpoint: enable from where it is, then apply it.
             self.start_enable();
         }
@@ -519,7 +464,7 @@ impl Device for OdriveAxis {
             self.push(Message::SetAxisState { requested_state }, ctx, out);
         }
         // Holding (any other phase): the axis keeps its input by itself.
-        if matches!(self.status.phase, Phase::Unmanaged | Phase::Enabled)
+        if matches!(self.life.status.phase, Phase::Unmanaged | Phase::Enabled)
             && std::mem::take(&mut self.dirty)
         {
             self.push(self.setpoint(), ctx, out);
@@ -534,9 +479,9 @@ impl Device for OdriveAxis {
                 Message::GetEncoderEstimates { pos, vel } => {
                     let p = pos as f64 * TAU;
                     self.last_pos = Some(p);
-                    if self.step == Step::Align && self.sent {
-                        self.status.phase = Phase::Enabling;
-                        self.go(Step::Enable);
+                    if self.life.step == Step::Align && self.life.sent {
+                        self.life.status.phase = Phase::Enabling;
+                        self.life.go(Step::Enable);
                     }
                     self.update(POSITION, Some(p), fault, reply, out);
                     self.update(VELOCITY, Some(vel as f64 * TAU), fault, reply, out);
@@ -572,7 +517,7 @@ impl Device for OdriveAxis {
                 op: Op::Odrive(msg),
             } => {
                 if matches!(msg.cmd_id(), CmdId::Heartbeat | CmdId::GetEncoderEstimates)
-                    && self.sent
+                    && self.life.sent
                 {
                     self.missing(reply.t_sample_ns);
                 }
@@ -589,15 +534,8 @@ impl Device for OdriveAxis {
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
         let managed = self.managed();
         self.dirty = false;
-        if managed {
-            self.status.safe = SafeProgress::Pending;
-            if !matches!(
-                self.status.phase,
-                Phase::Enabled | Phase::Enabling | Phase::Holding | Phase::Disabled
-            ) {
-                self.step = Step::None;
-                return;
-            }
+        if managed && !self.life.begin_safe() {
+            return;
         }
         let idle = Message::SetAxisState {
             requested_state: axis_state::IDLE,
@@ -605,7 +543,7 @@ impl Device for OdriveAxis {
         let (msg, state) = match action {
             SafeAction::TorqueOff | SafeAction::Damp { .. } => (idle, axis_state::IDLE),
             SafeAction::Hold => match self.last_pos {
-                Some(p) if self.status.phase != Phase::Disabled => {
+                Some(p) if self.life.status.phase != Phase::Disabled => {
                     (self.hold_input(p), axis_state::CLOSED_LOOP_CONTROL)
                 }
                 _ => (idle, axis_state::IDLE),
@@ -625,57 +563,37 @@ impl Device for OdriveAxis {
             return;
         }
         if state == axis_state::IDLE {
-            self.goal = Goal::Limp;
-            self.status.phase = Phase::Disabled;
+            self.life.goal = Goal::Limp;
+            self.life.status.phase = Phase::Disabled;
             self.safe_msg = None;
         } else {
             self.safe_msg = Some(msg);
-            self.status.phase = Phase::Holding;
-            if self.status.tripped {
-                self.goal = Goal::Hold;
+            self.life.status.phase = Phase::Holding;
+            if self.life.status.tripped {
+                self.life.goal = Goal::Hold;
             }
         }
         // Confirmed by the axis's heartbeat showing the state.
-        self.go(Step::Safe);
+        self.life.go(Step::Safe);
         self.want_state = state;
         self.heartbeat(ctx, out);
-        self.sent = true;
+        self.life.sent = true;
     }
 
     fn status(&self) -> DeviceStatus {
-        self.status
+        self.life.status
     }
 
     fn bring_up(&mut self, startup: Startup, _ctx: TickCtx) {
-        let tripped = self.status.tripped;
-        self.startup = startup;
-        self.goal = if self.resume_on || (startup == Startup::Enable && !self.user_off && !tripped)
-        {
-            Goal::Drive
-        } else if tripped && self.goal == Goal::Hold {
-            Goal::Hold
-        } else {
-            Goal::Limp
-        };
-        self.status = DeviceStatus {
-            tripped,
-            fault: self.status.fault,
-            ..DeviceStatus::probing()
-        };
-        self.go(Step::Probe);
-        self.next_try_ns = 0;
+        self.life.bring_up(startup);
+        self.life.go(Step::Probe);
     }
 
     fn bus_lost(&mut self) {
         if !self.managed() {
             return;
         }
-        self.resume_on = matches!(self.status.phase, Phase::Enabled | Phase::Enabling);
-        self.status.phase = Phase::Offline;
-        if self.status.safe == SafeProgress::Pending {
-            self.status.safe = SafeProgress::None;
-        }
-        self.step = Step::None;
+        self.life.bus_lost();
         self.dirty = false;
     }
 
@@ -686,27 +604,17 @@ impl Device for OdriveAxis {
         if !CHANNELS.get(channel).is_some_and(|c| c.writable) {
             return false;
         }
-        match self.status.phase {
-            Phase::Unmanaged | Phase::Enabled => true,
-            Phase::Disabled => {
-                self.startup == Startup::HoldOff && !self.status.tripped && !self.user_off
-            }
-            _ => false,
-        }
+        self.life.accepts_setpoints()
     }
 
     fn trip(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.resume_on = false;
-        if self.managed() {
-            self.status.tripped = true;
-        }
-        self.goal = Goal::Limp;
+        self.life.begin_trip();
         self.safe(action, ctx, out);
     }
 
     fn report(&mut self, ctx: TickCtx, out: &mut Bounded<Update>) {
         if self.report_enable {
-            let on = matches!(self.status.phase, Phase::Enabled);
+            let on = matches!(self.life.status.phase, Phase::Enabled);
             let _ = out.push(Update::local(odrive_channel::ENABLE, on as u8 as f64, ctx));
         }
     }

@@ -21,10 +21,7 @@
 //! damaged: the channel goes stale and the rejection is counted, never delivered.
 
 use super::register::{ConfigItem, ControlTable, RegChannel};
-use crate::lifecycle::{
-    Backoff, DeviceStatus, Failure, Phase, SafeProgress, Startup, PROBE_SPACING_NS, PROBE_TRIES,
-    SAFE_RETRY_NS, STEP_TRIES,
-};
+use crate::lifecycle::{Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup};
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
 use crate::stage::{Channel, Device, SafeAction, TickCtx};
@@ -42,17 +39,6 @@ struct Expect {
     /// The value it must read (a verification), if any.
     want: Option<i64>,
     got: Option<i64>,
-}
-
-/// Where a lifecycle should end.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Goal {
-    /// Enabled, accepting setpoints.
-    Drive,
-    /// Powered at its present position, refusing setpoints (tripped with a `hold` action).
-    Hold,
-    /// Torque off.
-    Limp,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -73,26 +59,20 @@ enum Step {
     Safe,
 }
 
+impl LifeStep for Step {
+    const NONE: Self = Step::None;
+    const PROBE: Self = Step::Probe;
+    const SAFE: Self = Step::Safe;
+}
+
 /// The lifecycle state of a register device.
 #[derive(Debug)]
 struct Life {
-    status: DeviceStatus,
-    startup: Startup,
-    /// Where it should end up.
-    goal: Goal,
+    /// Status, goal, step and retries, as every managed device keeps them.
+    base: Lifecycle<Step>,
     /// It has been up (configured) since it was first brought up: a later enable that cannot
     /// happen leaves it disabled instead of failing its bring-up.
     was_up: bool,
-    /// The user switched it off through its `enable` channel (a hold-off device then waits for
-    /// `enable = 1`, not for any setpoint).
-    user_off: bool,
-    /// It was driving when its bus vanished: it resumes driving when the bus returns.
-    resume_on: bool,
-    step: Step,
-    /// The step's requests are out.
-    sent: bool,
-    tries: u8,
-    next_try_ns: u64,
     expect: [Expect; EXPECT],
     n_expect: usize,
     /// Last Torque Enable read.
@@ -114,16 +94,8 @@ struct Life {
 impl Life {
     fn new() -> Self {
         Self {
-            status: DeviceStatus::UNMANAGED,
-            startup: Startup::Enable,
-            goal: Goal::Limp,
+            base: Lifecycle::new(),
             was_up: false,
-            user_off: false,
-            resume_on: false,
-            step: Step::None,
-            sent: false,
-            tries: 0,
-            next_try_ns: 0,
             expect: [Expect {
                 addr: 0,
                 len: 0,
@@ -143,14 +115,12 @@ impl Life {
     }
 
     fn managed(&self) -> bool {
-        self.status.phase != Phase::Unmanaged
+        self.base.managed()
     }
 
     /// Starts `step` (its requests go out at the next flush).
     fn go(&mut self, step: Step) {
-        self.step = step;
-        self.sent = false;
-        self.tries = 0;
+        self.base.go(step);
         self.n_expect = 0;
     }
 
@@ -172,12 +142,6 @@ impl Life {
 
     fn got(&self, addr: u16) -> Option<i64> {
         self.expected().iter().find(|e| e.addr == addr)?.got
-    }
-
-    fn fail(&mut self, f: Failure) {
-        self.status.failure = Some(f);
-        self.status.phase = Phase::Failed;
-        self.step = Step::None;
     }
 }
 
@@ -311,7 +275,10 @@ impl<T: ControlTable> RegDevice<T> {
     }
 
     fn enabled(&self) -> bool {
-        matches!(self.life.status.phase, Phase::Enabled | Phase::Unmanaged)
+        matches!(
+            self.life.base.status.phase,
+            Phase::Enabled | Phase::Unmanaged
+        )
     }
 
     /// The raw range a goal may be written in.
@@ -327,12 +294,12 @@ impl<T: ControlTable> RegDevice<T> {
         if !self.life.managed() {
             return;
         }
-        if self.life.step == Step::None {
+        if self.life.base.step == Step::None {
             if let Some(at) = self.life.reboot_at {
-                if ctx.now_ns >= at && !matches!(self.life.status.phase, Phase::Offline) {
+                if ctx.now_ns >= at && !matches!(self.life.base.status.phase, Phase::Offline) {
                     self.life.reboot_at = None;
                     self.life.recovering = true;
-                    self.life.goal = Goal::Drive;
+                    self.life.base.goal = Goal::Drive;
                     self.life.go(Step::Reboot);
                 }
             }
@@ -343,12 +310,12 @@ impl<T: ControlTable> RegDevice<T> {
                 }
             }
         }
-        if self.life.sent || ctx.now_ns < self.life.next_try_ns {
+        if self.life.base.sent || ctx.now_ns < self.life.base.next_try_ns {
             return;
         }
-        self.life.sent = true;
-        match self.life.step {
-            Step::None => self.life.sent = false,
+        self.life.base.sent = true;
+        match self.life.base.step {
+            Step::None => self.life.base.sent = false,
             Step::Probe => self.push(Op::Ping, ctx, out),
             Step::Reboot => self.push(Op::Reboot, ctx, out),
             Step::ModelRead => {
@@ -431,20 +398,11 @@ impl<T: ControlTable> RegDevice<T> {
     /// A lifecycle request went unanswered (or was refused): retry, or give up.
     fn retry(&mut self, now_ns: u64) {
         let l = &mut self.life;
-        l.tries = l.tries.saturating_add(1);
-        let (limit, spacing) = match l.step {
-            Step::Probe => (PROBE_TRIES, PROBE_SPACING_NS),
-            // A safe action is sent again until it is confirmed; the executor bounds the wait.
-            Step::Safe => (u8::MAX, SAFE_RETRY_NS),
-            _ => (STEP_TRIES, 0),
-        };
-        if l.tries < limit {
-            l.sent = false;
-            l.next_try_ns = now_ns + spacing;
+        if !l.base.retry_exhausted(now_ns) {
             return;
         }
-        match l.step {
-            Step::Probe | Step::ModelRead | Step::ReadConfig => l.fail(Failure::NoAnswer),
+        match l.base.step {
+            Step::Probe | Step::ModelRead | Step::ReadConfig => l.base.fail(Failure::NoAnswer),
             Step::WriteConfig => {
                 let bad = l.expected().iter().find(|e| e.got != e.want).copied();
                 let f = match bad {
@@ -455,23 +413,18 @@ impl<T: ControlTable> RegDevice<T> {
                     },
                     None => Failure::NoAnswer,
                 };
-                l.fail(f);
+                l.base.fail(f);
             }
-            Step::Enable | Step::Align | Step::TorqueOff { .. } => {
-                // Up, but it did not do what it was asked: limp, and say why.
-                l.status.failure = Some(Failure::EnableRefused);
-                l.status.phase = Phase::Disabled;
-                l.goal = Goal::Limp;
-                l.step = Step::None;
-            }
+            // Up, but it did not do what it was asked: limp, and say why.
+            Step::Enable | Step::Align | Step::TorqueOff { .. } => l.base.refuse_enable(),
             Step::Reboot => {
                 // No answer to REBOOT (status return level < 2, or it restarted at once):
                 // look for it again.
                 l.go(Step::Probe);
-                l.next_try_ns = now_ns + BOOT_NS;
+                l.base.next_try_ns = now_ns + BOOT_NS;
             }
             // The action stays unconfirmed: the executor reports it.
-            Step::Safe | Step::None => l.step = Step::None,
+            Step::Safe | Step::None => l.base.step = Step::None,
         }
     }
 
@@ -492,31 +445,27 @@ impl<T: ControlTable> RegDevice<T> {
     fn settle(&mut self) {
         let l = &mut self.life;
         l.was_up = true;
-        if l.goal != Goal::Limp {
-            l.status.phase = Phase::Enabling;
+        if l.base.goal != Goal::Limp {
+            l.base.status.phase = Phase::Enabling;
             l.go(Step::Align);
         } else if l.torque == Some(true) {
             l.go(Step::TorqueOff { then_write: false });
         } else {
-            l.status.phase = Phase::Disabled;
-            l.step = Step::None;
-            if l.status.tripped {
-                l.status.safe = SafeProgress::Confirmed;
-            }
+            l.base.settle_limp();
         }
     }
 
     /// Every reply a step waited for is in: decide.
     fn step_done(&mut self, now_ns: u64) {
-        match self.life.step {
+        match self.life.base.step {
             Step::ModelRead => {
                 let found = self.life.got(T::MODEL_AT).unwrap_or(0) as u16;
-                self.life.status.model = Some(found);
+                self.life.base.status.model = Some(found);
                 if self.model_ok(found) {
-                    self.life.status.phase = Phase::Configuring;
+                    self.life.base.status.phase = Phase::Configuring;
                     self.life.go(Step::ReadConfig);
                 } else {
-                    self.life.fail(Failure::WrongModel { found });
+                    self.life.base.fail(Failure::WrongModel { found });
                 }
             }
             Step::ReadConfig => {
@@ -561,11 +510,11 @@ impl<T: ControlTable> RegDevice<T> {
                     // later it stays limp, and says why.
                     let f = Failure::OutOfRange { raw };
                     let l = &mut self.life;
-                    l.goal = Goal::Limp;
-                    if l.status.tripped || l.recovering || l.user_off || !l.was_up {
-                        l.fail(f);
+                    l.base.goal = Goal::Limp;
+                    if l.base.status.tripped || l.recovering || l.base.user_off || !l.was_up {
+                        l.base.fail(f);
                     } else {
-                        l.status.failure = Some(f);
+                        l.base.status.failure = Some(f);
                         l.go(Step::TorqueOff { then_write: false });
                     }
                     return;
@@ -579,17 +528,10 @@ impl<T: ControlTable> RegDevice<T> {
                 }
                 let l = &mut self.life;
                 l.torque = Some(true);
-                l.status.failure = None;
                 l.recovering = false;
-                l.step = Step::None;
-                if l.goal == Goal::Hold {
-                    l.status.phase = Phase::Holding;
-                    l.status.safe = SafeProgress::Confirmed;
-                } else {
-                    l.status.phase = Phase::Enabled;
-                    l.status.tripped = false;
-                    l.status.safe = SafeProgress::None;
-                }
+                // Holding too: the last failure is over.
+                l.base.status.failure = None;
+                l.base.switched_on();
                 if let Some((i, _)) = self.hold {
                     self.last[i] = self.life.present;
                 }
@@ -604,16 +546,15 @@ impl<T: ControlTable> RegDevice<T> {
                     return self.retry(now_ns);
                 }
                 let l = &mut self.life;
-                l.status.safe = SafeProgress::Confirmed;
+                l.base.safe_confirmed();
                 if l.got(T::TORQUE) == Some(0) {
                     l.torque = Some(false);
-                    if l.status.phase == Phase::Holding {
+                    if l.base.status.phase == Phase::Holding {
                         // Its torque is off (the servo's own shutdown): it is limp.
-                        l.status.phase = Phase::Disabled;
-                        l.goal = Goal::Limp;
+                        l.base.status.phase = Phase::Disabled;
+                        l.base.goal = Goal::Limp;
                     }
                 }
-                l.step = Step::None;
             }
             Step::None | Step::Probe | Step::Reboot => {}
         }
@@ -630,15 +571,15 @@ impl<T: ControlTable> RegDevice<T> {
             return;
         }
         let now = reply.t_sample_ns;
-        match (self.life.step, reply.data) {
+        match (self.life.base.step, reply.data) {
             (Step::Probe, ReplyData::Ping { model, .. }) => {
-                self.life.status.model = model.or(self.life.status.model);
+                self.life.base.status.model = model.or(self.life.base.status.model);
                 match model {
                     Some(m) if !self.model_ok(m) => {
-                        self.life.fail(Failure::WrongModel { found: m })
+                        self.life.base.fail(Failure::WrongModel { found: m })
                     }
                     Some(_) => {
-                        self.life.status.phase = Phase::Configuring;
+                        self.life.base.status.phase = Phase::Configuring;
                         self.life.go(Step::ReadConfig);
                     }
                     None => self.life.go(Step::ModelRead),
@@ -652,8 +593,8 @@ impl<T: ControlTable> RegDevice<T> {
             ) => self.retry(now),
             (Step::Reboot, ReplyData::Ack) => {
                 self.life.go(Step::Probe);
-                self.life.status.phase = Phase::Probing;
-                self.life.next_try_ns = now + BOOT_NS;
+                self.life.base.status.phase = Phase::Probing;
+                self.life.base.next_try_ns = now + BOOT_NS;
             }
             (_, ReplyData::Register { addr, len, value }) => {
                 let l = &mut self.life;
@@ -680,13 +621,13 @@ impl<T: ControlTable> RegDevice<T> {
                     .expected()
                     .iter()
                     .any(|e| e.addr == addr && e.len == len && e.got.is_none());
-                if waiting && self.life.sent {
+                if waiting && self.life.base.sent {
                     // One retry per round: the other reads of the round are resent with it.
                     for e in &mut self.life.expect[..self.life.n_expect] {
                         e.got = None;
                     }
-                    if self.life.step == Step::Safe {
-                        self.life.sent = false;
+                    if self.life.base.step == Step::Safe {
+                        self.life.base.sent = false;
                     }
                     self.retry(now);
                 }
@@ -697,8 +638,8 @@ impl<T: ControlTable> RegDevice<T> {
 
     /// Records a fault reported by the device.
     fn set_fault(&mut self, bits: u32, now_ns: u64) {
-        let was = self.life.status.fault;
-        self.life.status.fault = bits;
+        let was = self.life.base.status.fault;
+        self.life.base.status.fault = bits;
         if bits != 0 && was == 0 && self.life.reboot_on_fault && self.life.managed() {
             self.life.reboot_at = Some(self.life.backoff.fault_at(now_ns));
         }
@@ -709,14 +650,14 @@ impl<T: ControlTable> RegDevice<T> {
     fn start_enable(&mut self) {
         self.pending.iter_mut().for_each(|p| *p = None);
         let l = &mut self.life;
-        l.goal = Goal::Drive;
-        l.user_off = false;
-        if l.status.fault != 0 && T::REBOOT {
+        l.base.goal = Goal::Drive;
+        l.base.user_off = false;
+        if l.base.status.fault != 0 && T::REBOOT {
             // Only a reboot clears a latched hardware error.
             l.go(Step::Reboot);
-            l.status.phase = Phase::Probing;
+            l.base.status.phase = Phase::Probing;
         } else {
-            l.status.phase = Phase::Enabling;
+            l.base.status.phase = Phase::Enabling;
             l.go(Step::Align);
         }
     }
@@ -725,9 +666,9 @@ impl<T: ControlTable> RegDevice<T> {
     fn start_disable(&mut self) {
         self.pending.iter_mut().for_each(|p| *p = None);
         let l = &mut self.life;
-        l.goal = Goal::Limp;
-        l.user_off = true;
-        l.status.phase = Phase::Disabled;
+        l.base.goal = Goal::Limp;
+        l.base.user_off = true;
+        l.base.status.phase = Phase::Disabled;
         l.go(Step::TorqueOff { then_write: false });
     }
 }
@@ -748,7 +689,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
         }
         if self.life.managed()
             && matches!(
-                self.life.status.phase,
+                self.life.base.status.phase,
                 Phase::Offline | Phase::Probing | Phase::Failed
             )
         {
@@ -768,7 +709,10 @@ impl<T: ControlTable> Device for RegDevice<T> {
                 return;
             }
             if value >= 0.5 {
-                if !matches!(self.life.status.phase, Phase::Enabled | Phase::Enabling) {
+                if !matches!(
+                    self.life.base.status.phase,
+                    Phase::Enabled | Phase::Enabling
+                ) {
                     self.start_enable();
                 }
             } else {
@@ -782,7 +726,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
         if c.write.is_none() || !self.accepts(i) {
             return;
         }
-        if self.life.status.phase == Phase::Disabled {
+        if self.life.base.status.phase == Phase::Disabled {
             // A hold-off device's first setpoint: enable from where it is, then apply it.
             self.start_enable();
         }
@@ -818,7 +762,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
                 self.device_errors += 1;
                 self.fault_tick = Some(reply.tick);
                 let code = code as u8;
-                if T::HW_ERROR.is_some() && code & 0x80 != 0 && self.life.status.fault == 0 {
+                if T::HW_ERROR.is_some() && code & 0x80 != 0 && self.life.base.status.fault == 0 {
                     // An alert: the Hardware Error Status says what.
                     self.life.fault_check = true;
                 }
@@ -829,7 +773,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
             }
             _ => return,
         };
-        if value.is_some() && !fault && self.life.status.fault != 0 {
+        if value.is_some() && !fault && self.life.base.status.fault != 0 {
             // A clean status packet (no error bits, no alert): the condition has passed, or
             // the hardware error was cleared by a reboot.
             self.set_fault(0, reply.t_sample_ns);
@@ -871,21 +815,15 @@ impl<T: ControlTable> Device for RegDevice<T> {
         let managed = self.life.managed();
         if managed {
             self.life.go(Step::Safe);
-            self.life.sent = true;
-            self.life.status.safe = SafeProgress::Pending;
-            if !matches!(
-                self.life.status.phase,
-                Phase::Enabled | Phase::Enabling | Phase::Holding | Phase::Disabled
-            ) {
-                // Not up: nothing can be sent; the action stays unconfirmed.
-                self.life.step = Step::None;
+            self.life.base.sent = true;
+            if !self.life.base.begin_safe() {
                 return;
             }
         }
         match action {
             SafeAction::Hold => match self.hold {
                 Some((i, goal))
-                    if self.last[i].is_some() && self.life.status.phase != Phase::Disabled =>
+                    if self.last[i].is_some() && self.life.base.status.phase != Phase::Disabled =>
                 {
                     let raw = self.last[i].unwrap_or(0);
                     let c = self.table[i];
@@ -897,10 +835,10 @@ impl<T: ControlTable> Device for RegDevice<T> {
                         // A servo that cut its own torque (a hardware error) holds nothing.
                         self.push_read(T::TORQUE, 1, ctx, out);
                         self.life.expect(T::TORQUE, 1, None);
-                        if self.life.status.tripped {
-                            self.life.goal = Goal::Hold;
+                        if self.life.base.status.tripped {
+                            self.life.base.goal = Goal::Hold;
                         }
-                        self.life.status.phase = Phase::Holding;
+                        self.life.base.status.phase = Phase::Holding;
                     }
                 }
                 // Nothing known to hold (or limp already): the only safe thing is to let go.
@@ -911,8 +849,8 @@ impl<T: ControlTable> Device for RegDevice<T> {
                 if managed {
                     self.push_read(T::TORQUE, 1, ctx, out);
                     self.life.expect(T::TORQUE, 1, Some(0));
-                    self.life.goal = Goal::Limp;
-                    self.life.status.phase = Phase::Disabled;
+                    self.life.base.goal = Goal::Limp;
+                    self.life.base.status.phase = Phase::Disabled;
                 }
             }
             SafeAction::Setpoint { channel, value } => {
@@ -925,35 +863,21 @@ impl<T: ControlTable> Device for RegDevice<T> {
                 if managed {
                     self.push_read(addr, c.len, ctx, out);
                     self.life.expect(addr, c.len, Some(raw));
-                    self.life.status.phase = Phase::Holding;
+                    self.life.base.status.phase = Phase::Holding;
                 }
             }
         }
     }
 
     fn status(&self) -> DeviceStatus {
-        self.life.status
+        self.life.base.status
     }
 
     fn bring_up(&mut self, startup: Startup, _ctx: TickCtx) {
         let l = &mut self.life;
-        let tripped = l.status.tripped;
-        l.startup = startup;
-        l.goal = if l.resume_on || (startup == Startup::Enable && !l.user_off && !tripped) {
-            Goal::Drive
-        } else if tripped && l.goal == Goal::Hold {
-            Goal::Hold
-        } else {
-            Goal::Limp
-        };
-        l.status = DeviceStatus {
-            tripped,
-            fault: l.status.fault,
-            ..DeviceStatus::probing()
-        };
+        l.base.bring_up(startup);
         l.torque = None;
         l.go(Step::Probe);
-        l.next_try_ns = 0;
     }
 
     fn bus_lost(&mut self) {
@@ -962,13 +886,9 @@ impl<T: ControlTable> Device for RegDevice<T> {
         }
         self.pending.iter_mut().for_each(|p| *p = None);
         let l = &mut self.life;
-        l.resume_on = matches!(l.status.phase, Phase::Enabled | Phase::Enabling) || l.recovering;
-        l.status.phase = Phase::Offline;
-        if l.status.safe == SafeProgress::Pending {
-            // Whatever was on its way did not arrive.
-            l.status.safe = SafeProgress::None;
-        }
-        l.step = Step::None;
+        l.base.bus_lost();
+        // An automatic recovery under way resumes too.
+        l.base.resume_on |= l.recovering;
         l.n_expect = 0;
     }
 
@@ -977,23 +897,11 @@ impl<T: ControlTable> Device for RegDevice<T> {
             return self.life.managed();
         }
         let writable = self.table.get(channel).is_some_and(|c| c.write.is_some());
-        let l = &self.life;
-        writable
-            && match l.status.phase {
-                Phase::Unmanaged | Phase::Enabled => true,
-                Phase::Disabled => {
-                    l.startup == Startup::HoldOff && !l.status.tripped && !l.user_off
-                }
-                _ => false,
-            }
+        writable && self.life.base.accepts_setpoints()
     }
 
     fn trip(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {
-        self.life.goal = Goal::Limp;
-        self.life.resume_on = false;
-        if self.life.managed() {
-            self.life.status.tripped = true;
-        }
+        self.life.base.begin_trip();
         self.safe(action, ctx, out);
     }
 
@@ -1058,7 +966,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
     }
 
     fn describe(&self) -> String {
-        let model = self.life.status.model.map(|m| {
+        let model = self.life.base.status.model.map(|m| {
             let name = self
                 .family
                 .models()
