@@ -350,6 +350,23 @@ impl<S: LifeStep> Lifecycle<S> {
         self.goal = Goal::Limp;
     }
 
+    /// What a write of `value` to the `enable` channel asks of a managed device: `Some(true)`
+    /// start enabling (from where it is; nothing if it already is or is on its way),
+    /// `Some(false)` switch off, `None` nothing.
+    pub(crate) fn enable_request(&self, value: f64) -> Option<bool> {
+        if value >= 0.5 {
+            (!matches!(self.status.phase, Phase::Enabled | Phase::Enabling)).then_some(true)
+        } else {
+            Some(false)
+        }
+    }
+
+    /// An accepted setpoint while disabled is a hold-off device's first command: it enables
+    /// the device from where it is before it applies.
+    pub(crate) fn setpoint_enables(&self) -> bool {
+        self.status.phase == Phase::Disabled
+    }
+
     /// Bring-up with `startup`: where it should end (driving again if it was, or per `startup`
     /// unless the user or a trip switched it off; holding again if it held), and a fresh
     /// probing status keeping the trip and the fault. The device then starts its probe step.
@@ -770,6 +787,25 @@ mod tests {
         // Plain data: copied, never allocated.
         let copy = l;
         assert_eq!(copy, l);
+    }
+
+    /// `enable = 1` starts enabling unless it is already enabled or enabling; `enable = 0`
+    /// always switches off; only a disabled device is enabled by a setpoint.
+    #[test]
+    fn enable_writes_and_first_setpoints() {
+        for phase in [
+            Phase::Probing,
+            Phase::Disabled,
+            Phase::Enabling,
+            Phase::Enabled,
+            Phase::Offline,
+        ] {
+            let l = in_phase(phase);
+            let on = !matches!(phase, Phase::Enabling | Phase::Enabled);
+            assert_eq!(l.enable_request(1.0), on.then_some(true), "{phase:?}");
+            assert_eq!(l.enable_request(0.0), Some(false), "{phase:?}");
+            assert_eq!(l.setpoint_enables(), phase == Phase::Disabled, "{phase:?}");
+        }
     }
 
     #[test]

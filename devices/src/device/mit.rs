@@ -338,20 +338,17 @@ impl Device for MitMotor {
                 });
                 return;
             }
-            if value >= 0.5 {
-                if !matches!(self.life.status.phase, Phase::Enabled | Phase::Enabling) {
-                    self.start_enable();
-                }
-            } else {
-                self.start_disable();
+            match self.life.enable_request(value) {
+                Some(true) => self.start_enable(),
+                Some(false) => self.start_disable(),
+                None => {}
             }
             return;
         }
         if !self.accepts(channel) {
             return;
         }
-        if self.life.status.phase == Phase::Disabled {
-            // A hold-off motor's first setpoint: enable from where it is, then apply it.
+        if self.life.setpoint_enables() {
             self.start_enable();
         }
         let v = value as f32;

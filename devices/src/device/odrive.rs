@@ -217,26 +217,10 @@ impl OdriveAxis {
                 }
                 let input = self.hold_input(self.last_pos.unwrap_or(0.0));
                 self.push(input, ctx, out);
-                self.push(
-                    Message::SetAxisState {
-                        requested_state: axis_state::CLOSED_LOOP_CONTROL,
-                    },
-                    ctx,
-                    out,
-                );
-                self.want_state = axis_state::CLOSED_LOOP_CONTROL;
-                self.heartbeat(ctx, out);
+                self.request_state(axis_state::CLOSED_LOOP_CONTROL, ctx, out);
             }
             Step::Idle if self.life.tries == 0 => {
-                self.push(
-                    Message::SetAxisState {
-                        requested_state: axis_state::IDLE,
-                    },
-                    ctx,
-                    out,
-                );
-                self.want_state = axis_state::IDLE;
-                self.heartbeat(ctx, out);
+                self.request_state(axis_state::IDLE, ctx, out);
             }
             Step::Enable | Step::Idle | Step::Safe => self.heartbeat(ctx, out),
         }
@@ -315,6 +299,19 @@ impl OdriveAxis {
             Step::Enable | Step::Idle | Step::Safe => self.poll_again(),
             Step::None => {}
         }
+    }
+
+    /// Asks the axis for `state` and for the heartbeat that will confirm it.
+    fn request_state(&mut self, state: u32, ctx: TickCtx, out: &mut Bounded<Request>) {
+        self.push(
+            Message::SetAxisState {
+                requested_state: state,
+            },
+            ctx,
+            out,
+        );
+        self.want_state = state;
+        self.heartbeat(ctx, out);
     }
 
     fn start_enable(&mut self) {
@@ -418,20 +415,17 @@ impl Device for OdriveAxis {
                 self.raw_enable = Some(value >= 0.5);
                 return;
             }
-            if value >= 0.5 {
-                if !matches!(self.life.status.phase, Phase::Enabled | Phase::Enabling) {
-                    self.start_enable();
-                }
-            } else {
-                self.start_disable();
+            match self.life.enable_request(value) {
+                Some(true) => self.start_enable(),
+                Some(false) => self.start_disable(),
+                None => {}
             }
             return;
         }
         if !self.accepts(channel) {
             return;
         }
-        if self.life.status.phase == Phase::Disabled {
-            // A hold-off axis's first setpoint: enable from where it is, then apply it.
+        if self.life.setpoint_enables() {
             self.start_enable();
         }
         match channel {

@@ -708,15 +708,10 @@ impl<T: ControlTable> Device for RegDevice<T> {
             if !self.life.managed() {
                 return;
             }
-            if value >= 0.5 {
-                if !matches!(
-                    self.life.base.status.phase,
-                    Phase::Enabled | Phase::Enabling
-                ) {
-                    self.start_enable();
-                }
-            } else {
-                self.start_disable();
+            match self.life.base.enable_request(value) {
+                Some(true) => self.start_enable(),
+                Some(false) => self.start_disable(),
+                None => {}
             }
             return;
         }
@@ -726,8 +721,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
         if c.write.is_none() || !self.accepts(i) {
             return;
         }
-        if self.life.base.status.phase == Phase::Disabled {
-            // A hold-off device's first setpoint: enable from where it is, then apply it.
+        if self.life.base.setpoint_enables() {
             self.start_enable();
         }
         let raw = c.to_raw(value);
