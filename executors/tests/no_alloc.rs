@@ -31,6 +31,11 @@ fn ten_thousand_ticks_allocate_nothing() {
     let (domain, _guard) = support::private_domain("noalloc");
     let bus = Bus::open(&domain, "executor/arm").unwrap();
     let mut exec = Executor::new(&bus, &sub).unwrap();
+    // The watchdog period is on the bus for every client to read, not only in the manifest.
+    assert_eq!(
+        bus.command_watchdog("arm").unwrap(),
+        Some(Some(std::time::Duration::from_millis(50)))
+    );
     let mut ctl = Controller::new(&bus);
     let mut sub_j0 = StateSubscriber::with_buffer(&bus, "arm/j0", 64).unwrap();
     let mut stats = None;
