@@ -49,6 +49,7 @@ def test_status_bits_are_the_documented_ones():
     bits = {name: int(bit) for bit, name in re.findall(r"(\d+) `([A-Z_]+)`", text)}
     assert bits == {f.name: f.value.bit_length() - 1 for f in abi.Status}
     assert abi.flag_names(abi.STALE | abi.WATCHDOG) == ["stale", "watchdog"]
+    assert str(abi.STALE | abi.WATCHDOG) == "stale|watchdog" and str(abi.Status(0)) == "-"
 
 
 def test_the_docs_ctypes_mirror_is_the_packages():

@@ -43,6 +43,10 @@ class Status(enum.IntFlag):
     #: its ``enable`` state is set to 1.
     TRIPPED = 1 << 8
 
+    def __str__(self) -> str:
+        """The flag names as ``conductor`` prints them (``stale|clamped``), ``-`` for none."""
+        return "|".join(flag_names(int(self))) or "-"
+
 
 STALE = Status.STALE
 CLAMPED = Status.CLAMPED
