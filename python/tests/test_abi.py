@@ -49,7 +49,7 @@ def test_status_bits_are_the_documented_ones():
     bits = {name: int(bit) for bit, name in re.findall(r"(\d+) `([A-Z_]+)`", text)}
     assert bits == {f.name: f.value.bit_length() - 1 for f in abi.Status}
     assert abi.flag_names(abi.STALE | abi.WATCHDOG) == ["stale", "watchdog"]
-    assert str(abi.STALE | abi.WATCHDOG) == "stale|watchdog" and str(abi.Status(0)) == "-"
+    assert str(abi.STALE | abi.WATCHDOG) == "stale,watchdog" and str(abi.Status(0)) == "-"
 
 
 def test_the_docs_ctypes_mirror_is_the_packages():
@@ -100,7 +100,7 @@ def test_bad_names_are_typed_errors():
 def test_the_package_is_installed_with_its_dependencies():
     from importlib import metadata
 
-    dist = metadata.distribution("conductor-bus")
+    dist = metadata.distribution("conductor-py")
     assert dist.version == conductor.__version__
     reqs = " ".join(dist.requires or [])
     assert "iceoryx2" in reqs and "numpy" in reqs

@@ -44,8 +44,8 @@ class Status(enum.IntFlag):
     TRIPPED = 1 << 8
 
     def __str__(self) -> str:
-        """The flag names as ``conductor`` prints them (``stale|clamped``), ``-`` for none."""
-        return "|".join(flag_names(int(self))) or "-"
+        """The flag names as ``conductor`` prints them (``stale,clamped``), ``-`` for none."""
+        return ",".join(flag_names(int(self))) or "-"
 
 
 STALE = Status.STALE
@@ -98,7 +98,7 @@ class StateSample(ctypes.Structure):
         return (
             f"StateSample(seq={self.seq}, tick={self.tick}, t_sample_ns={self.t_sample_ns}, "
             f"t_publish_ns={self.t_publish_ns}, value={self.value!r}, "
-            f"status={'|'.join(flag_names(self.status)) or 0})"
+            f"status={Status(self.status)})"
         )
 
 

@@ -8,7 +8,7 @@ from typing import Dict, Mapping, Optional, Tuple, Union
 
 import iceoryx2 as iox2
 
-from .abi import MAX_SETPOINTS, CommandFrame, StateSample, Status, flag_names
+from .abi import MAX_SETPOINTS, CommandFrame, StateSample, Status
 from .bus import Bus, connect
 from .discovery import StateInfo, resolve, watchdog
 from .errors import (
@@ -80,7 +80,7 @@ class Ack:
         extra = f", reason={self.reason!r}" if self.reason else ""
         return (
             f"Ack({self.state!r}, requested={self.requested!r}, verdict={self.verdict.name}, "
-            f"flags={'|'.join(flag_names(self.sample.status)) or 0}{extra})"
+            f"flags={Status(self.sample.status)}{extra})"
         )
 
 
@@ -204,16 +204,22 @@ class Commander:
         self._send_frames(self._frames(setpoints, validate))
 
     def send(
-        self, setpoints: Mapping[str, float], timeout: float = 1.0, validate: bool = True
+        self,
+        setpoints: Mapping[str, float],
+        timeout: Optional[float] = None,
+        validate: bool = True,
     ) -> Dict[str, Ack]:
         """Sends ``{state: value}`` (one frame per subsystem) and returns each state's
-        :class:`Ack` once the executor's samples tell its verdict.
+        :class:`Ack` (keyed ``subsystem/state``) once the executor's samples tell its verdict.
 
         Raises :class:`~conductor.NotDelivered` when no executor receives a frame, and
         :class:`~conductor.VerdictTimeout` when a state publishes no telling sample within
-        ``timeout`` s.
+        ``timeout`` s (default: 1 s plus three publish periods of the slowest state).
         """
         frames = self._frames(setpoints, validate)
+        if timeout is None:
+            slowest = min((self.info(n).rate_hz for n in setpoints), default=1.0)
+            timeout = 1.0 + 3.0 / max(slowest, 1e-3)
         targets = {}
         for _, names in frames.values():
             for name, value in names:
@@ -249,9 +255,16 @@ class Commander:
                 time.sleep(0.0005)
         return {name: acks[name] for name in targets}
 
-    def set(self, state: str, value: float, timeout: float = 1.0, validate: bool = True) -> Ack:
+    def set(
+        self,
+        state: str,
+        value: float,
+        timeout: Optional[float] = None,
+        validate: bool = True,
+    ) -> Ack:
         """Sends one setpoint and returns the executor's :class:`Ack` (see :meth:`send`)."""
-        return self.send({state: value}, timeout=timeout, validate=validate)[self.info(state).qualified_name]
+        acks = self.send({state: value}, timeout=timeout, validate=validate)
+        return acks[self.info(state).qualified_name]
 
 
 def _verdict(status: int) -> Verdict:
