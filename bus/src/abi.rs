@@ -7,8 +7,9 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
-/// Version of the payload layouts in this module. Bumped on any layout change; it is part of every
-/// type name and of the `conductor.abi` service attribute.
+/// Version of the payload layouts in this module. Bumped on any change of a layout or of the
+/// meaning of a field, flag or attribute (additions old readers can ignore keep it: `bus/ABI.md`,
+/// *Versioning*); it is part of every type name and of the `conductor.abi` service attribute.
 pub const ABI_VERSION: u32 = 2;
 
 /// Maximum number of setpoints one [`CommandFrame`] carries (a 41-DOF humanoid fits in one frame).

@@ -5,7 +5,9 @@ use iceoryx2::node::NodeView;
 use iceoryx2::prelude::{CallbackProgression, MessagingPattern, NodeState, Service as _};
 use iceoryx2::service::static_config::messaging_pattern::MessagingPattern as StaticPattern;
 
-use crate::abi::{StateSample, ABI_VERSION};
+use core::time::Duration;
+
+use crate::abi::{CommandFrame, StateSample, ABI_VERSION};
 use crate::bus::Bus;
 use crate::error::{BusError, Result};
 use crate::metadata::{self, ServiceKind, StateMeta, KEY_ABI, KEY_KIND};
@@ -88,6 +90,27 @@ impl Bus {
             (a.subsystem.as_str(), a.meta.index).cmp(&(b.subsystem.as_str(), b.meta.index))
         });
         Ok(out)
+    }
+
+    /// The command watchdog `subsystem`'s owner announces on its `commands` service
+    /// (`conductor.watchdog_ms`): `Some(Some(period))`, `Some(None)` when it runs none, `None`
+    /// when it does not say. An error when the subsystem has no `commands` service.
+    pub fn command_watchdog(&self, subsystem: &str) -> Result<Option<Option<Duration>>> {
+        naming::validate("subsystem", subsystem)?;
+        let name = naming::commands(subsystem);
+        let Some(details) = self.details(&name, MessagingPattern::PublishSubscribe)? else {
+            return Err(BusError::UnknownSubsystem {
+                name: subsystem.into(),
+                domain: self.domain().name().into(),
+                service: name,
+            });
+        };
+        // SAFETY: type_name() has no preconditions; it is unsafe only for implementors.
+        let tn = unsafe { <CommandFrame as iceoryx2::prelude::ZeroCopySend>::type_name() };
+        self.check_conductor_service(&name, &details, ServiceKind::Commands, tn)?;
+        Ok(metadata::watchdog_from_attributes(
+            details.static_details.attributes(),
+        ))
     }
 
     /// Subsystems that publish at least one state.

@@ -12,6 +12,14 @@
 //! | `conductor.rate_hz` | publish rate in Hz |
 //! | `conductor.limits` | `min,max` (either may be `-inf`/`inf`) |
 //! | `conductor.device` | the device the state belongs to (absent when none) |
+//!
+//! A subsystem's `commands` service carries, besides the first two, its command watchdog:
+//!
+//! | key | value |
+//! |---|---|
+//! | `conductor.watchdog_ms` | the watchdog period in ms (decimal), or `off`; absent when the owner does not say |
+
+use core::time::Duration;
 
 use iceoryx2::prelude::{AttributeSet, AttributeSpecifier};
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
@@ -35,6 +43,10 @@ pub const KEY_RATE: &str = "conductor.rate_hz";
 pub const KEY_LIMITS: &str = "conductor.limits";
 /// Attribute key of the device.
 pub const KEY_DEVICE: &str = "conductor.device";
+/// Attribute key of the command watchdog period (on a subsystem's `commands` service).
+pub const KEY_WATCHDOG: &str = "conductor.watchdog_ms";
+/// Value of [`KEY_WATCHDOG`] for an owner without a command watchdog.
+pub const WATCHDOG_OFF: &str = "off";
 
 /// What a Conductor service is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -112,6 +124,32 @@ fn define(spec: AttributeSpecifier, k: &str, v: &str) -> Result<AttributeSpecifi
 pub(crate) fn base_attributes(kind: ServiceKind) -> Result<AttributeSpecifier> {
     let spec = define(AttributeSpecifier::new(), KEY_ABI, &ABI_VERSION.to_string())?;
     define(spec, KEY_KIND, kind.as_str())
+}
+
+/// The attributes of a `commands` service whose owner runs a command watchdog of `watchdog`
+/// (`None`: no watchdog, published as [`WATCHDOG_OFF`]).
+pub(crate) fn command_attributes(watchdog: Option<Duration>) -> Result<AttributeSpecifier> {
+    let spec = base_attributes(ServiceKind::Commands)?;
+    define(spec, KEY_WATCHDOG, &fmt_watchdog(watchdog))
+}
+
+fn fmt_watchdog(watchdog: Option<Duration>) -> String {
+    match watchdog {
+        // Whole milliseconds print as integers ("500"), others with their fraction ("2.5").
+        Some(d) => format!("{}", d.as_nanos() as f64 / 1e6),
+        None => WATCHDOG_OFF.into(),
+    }
+}
+
+/// Reads a `commands` service's watchdog attribute: `Some(Some(period))`, `Some(None)` for
+/// [`WATCHDOG_OFF`], `None` when absent or malformed (the owner does not say).
+pub fn watchdog_from_attributes(attrs: &AttributeSet) -> Option<Option<Duration>> {
+    let v = get(attrs, KEY_WATCHDOG)?;
+    if v == WATCHDOG_OFF {
+        return Some(None);
+    }
+    let ms: f64 = v.parse().ok()?;
+    (ms.is_finite() && ms > 0.0).then(|| Some(Duration::from_secs_f64(ms / 1e3)))
 }
 
 fn fmt_limit(x: f64) -> String {
@@ -208,6 +246,29 @@ mod tests {
         let spec = m.to_attributes().unwrap();
         assert_eq!(spec.attributes().number_of_attributes(), 6);
         assert_eq!(StateMeta::from_attributes(spec.attributes()), Some(m));
+    }
+
+    #[test]
+    fn watchdog_roundtrip() {
+        for w in [
+            Some(Duration::from_millis(500)),
+            Some(Duration::from_micros(2500)),
+            None,
+        ] {
+            let spec = command_attributes(w).unwrap();
+            let attrs = spec.attributes();
+            assert_eq!(get(attrs, KEY_KIND).as_deref(), Some("commands"));
+            assert_eq!(watchdog_from_attributes(attrs), Some(w));
+        }
+        let spec = command_attributes(Some(Duration::from_millis(500))).unwrap();
+        assert_eq!(get(spec.attributes(), KEY_WATCHDOG).as_deref(), Some("500"));
+        let spec = command_attributes(Some(Duration::from_micros(2500))).unwrap();
+        assert_eq!(get(spec.attributes(), KEY_WATCHDOG).as_deref(), Some("2.5"));
+        let spec = command_attributes(None).unwrap();
+        assert_eq!(get(spec.attributes(), KEY_WATCHDOG).as_deref(), Some("off"));
+        // An owner that does not say.
+        let spec = base_attributes(ServiceKind::Commands).unwrap();
+        assert_eq!(watchdog_from_attributes(spec.attributes()), None);
     }
 
     #[test]

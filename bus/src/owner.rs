@@ -4,17 +4,19 @@
 //! `StatsPublisher::publish`) loan fixed-size samples from iceoryx2's pre-allocated shared
 //! memory and never allocate on the heap (checked by the counting-allocator test).
 
+use core::time::Duration;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::PortFactory as _;
+
+use iceoryx2::prelude::{AttributeSpecifier, PortFactory as _};
 
 use crate::abi::{CommandFrame, ExecutorStats, StateSample};
 use crate::bus::{qos, Bus, EventService, StateService};
 use crate::clock::monotonic_ns;
 use crate::error::{BusError, Result};
-use crate::metadata::{base_attributes, ServiceKind, StateMeta};
+use crate::metadata::{base_attributes, command_attributes, ServiceKind, StateMeta};
 use crate::naming;
 use crate::variant::RtIpc;
 
@@ -190,11 +192,22 @@ impl core::fmt::Debug for CommandReceiver {
 }
 
 impl CommandReceiver {
-    /// Creates `conductor/<subsystem>/commands` (owner side).
+    /// Creates `conductor/<subsystem>/commands` (owner side) without saying whether the owner
+    /// runs a command watchdog (no `conductor.watchdog_ms` attribute).
     pub fn create(bus: &Bus, subsystem: &str) -> Result<Self> {
+        Self::create_with(bus, subsystem, base_attributes(ServiceKind::Commands)?)
+    }
+
+    /// Creates `conductor/<subsystem>/commands` for an owner whose command watchdog fires after
+    /// `watchdog` without a command (`None`: no watchdog); the period is published as the
+    /// service's `conductor.watchdog_ms` attribute, so clients can read the contract.
+    pub fn with_watchdog(bus: &Bus, subsystem: &str, watchdog: Option<Duration>) -> Result<Self> {
+        Self::create_with(bus, subsystem, command_attributes(watchdog)?)
+    }
+
+    fn create_with(bus: &Bus, subsystem: &str, attrs: AttributeSpecifier) -> Result<Self> {
         naming::validate("subsystem", subsystem)?;
         let name = naming::commands(subsystem);
-        let attrs = base_attributes(ServiceKind::Commands)?;
         let service = bus.create_or_reopen_pubsub::<CommandFrame>(&name, &attrs, |b| {
             b.max_publishers(qos::COMMAND_PUBLISHERS)
                 .max_subscribers(qos::COMMAND_SUBSCRIBERS)

@@ -136,3 +136,22 @@ fn gather_and_scatter_move_vectors() {
     );
     assert!(ctl.scatter(&names, &[1.0]).is_err());
 }
+
+#[test]
+fn the_command_watchdog_is_read_from_the_commands_service() {
+    let d = Domain::unique("wdog").unwrap();
+    let bus = Bus::open(&d, "t").unwrap();
+    // An owner that does not say, one without a watchdog, one with 250 ms.
+    let _quiet = CommandReceiver::create(&bus, "quiet").unwrap();
+    let _none = CommandReceiver::with_watchdog(&bus, "none", None).unwrap();
+    let _some =
+        CommandReceiver::with_watchdog(&bus, "some", Some(Duration::from_millis(250))).unwrap();
+    let client = Bus::open(&d, "client").unwrap();
+    assert_eq!(client.command_watchdog("quiet").unwrap(), None);
+    assert_eq!(client.command_watchdog("none").unwrap(), Some(None));
+    assert_eq!(
+        client.command_watchdog("some").unwrap(),
+        Some(Some(Duration::from_millis(250)))
+    );
+    assert!(client.command_watchdog("absent").is_err());
+}

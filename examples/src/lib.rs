@@ -5,8 +5,8 @@
 //!
 //! * `pid-controller` — the thesis' Fig. 3.4 PID, fed by a State's derivative and integral;
 //! * `state-observer` — the thesis' Fig. 3.5 observer + state feedback, with nalgebra;
-//! * `python/controller.py` — the official iceoryx2 Python package and the ctypes mirror of
-//!   `bus/ABI.md`;
+//! * `python/controller.py` — the `conductor` Python package (`python/`, over the official
+//!   iceoryx2 package);
 //! * `python/udp_client.py` — a MATLAB-style client of `conductor udp-gateway`;
 //! * `sim-motor` — a first-order motor owned by a simulated executor ([`sim`], [`motor`]).
 //!

@@ -130,7 +130,8 @@ pub fn run(
     }
     let bus = Bus::open(domain, &format!("executor/{}", spec.subsystem))?;
     let mut publisher = StatePublisher::create(&bus, &spec.subsystem, &spec.states)?;
-    let mut commands = CommandReceiver::create(&bus, &spec.subsystem)?;
+    // The plant has no command watchdog, and says so on the bus.
+    let mut commands = CommandReceiver::with_watchdog(&bus, &spec.subsystem, None)?;
     let mut stats = StatsPublisher::create(&bus, &spec.subsystem)?;
     ready();
 

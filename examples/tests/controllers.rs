@@ -82,30 +82,18 @@ fn state_observer_estimates_velocity_and_holds_the_target() {
 fn python_controller_closes_the_loop_through_iceoryx2() {
     let d = Domain::unique("pyctl").unwrap();
     let _sim = sim::spawn(&d, motor::spec(500.0), motor::Motor::default()).unwrap();
+    // The `conductor` package of this checkout (`cargo xtask setup` also installs it).
     let r = run_json(
         Command::new(python())
             .arg(workspace().join("examples/python/controller.py"))
-            .args(["--domain", d.name(), "--target", "1", "--seconds", "3"]),
+            .args(["--domain", d.name(), "--target", "1", "--seconds", "3"])
+            .env("PYTHONPATH", workspace().join("python/src")),
     );
     assert!(r["frames"].as_u64().unwrap() > 100, "{r}");
     let theta = position(&d);
     assert!((theta - 1.0).abs() < 0.01, "position {theta}; {r}");
-}
-
-#[test]
-fn the_python_abi_module_is_the_one_documented_in_bus_abi_md() {
-    let doc = std::fs::read_to_string(workspace().join("bus/ABI.md")).unwrap();
-    let block = doc
-        .split("<!-- conductor_abi.py -->")
-        .nth(1)
-        .and_then(|after| after.split("```python\n").nth(1))
-        .and_then(|body| body.split("\n```").next())
-        .expect("the ctypes block in bus/ABI.md");
-    let ours =
-        std::fs::read_to_string(workspace().join("examples/python/conductor_abi.py")).unwrap();
-    assert_eq!(
-        ours.trim_end(),
-        block.trim_end(),
-        "examples/python/conductor_abi.py must be a verbatim copy of the block in bus/ABI.md"
-    );
+    // Its last setpoint, near zero at the target, was taken as sent; the plant runs no watchdog
+    // and says so on the bus.
+    assert_eq!(r["verdict"], "OK", "{r}");
+    assert!(r["watchdog_s"].is_null(), "{r}");
 }

@@ -128,7 +128,8 @@ impl Executor {
     /// Attaches already-built stages to the bus.
     pub fn with_stages(bus: &Bus, sub: &Subsystem, stages: Stages) -> Result<Self, ExecutorError> {
         let publisher = StatePublisher::create(bus, &sub.name, &state_specs(sub))?;
-        let commands = CommandReceiver::create(bus, &sub.name)?;
+        let watchdog = sub.watchdog_ns.map(std::time::Duration::from_nanos);
+        let commands = CommandReceiver::with_watchdog(bus, &sub.name, watchdog)?;
         let stats = StatsPublisher::create(bus, &sub.name)?;
         let names = Names::of(sub);
         Ok(Self {

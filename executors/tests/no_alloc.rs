@@ -88,6 +88,12 @@ fn ten_thousand_ticks_allocate_nothing() {
     assert!(s.setpoints_clamped > 0);
     // Stats go out every 100 ms of executor time (20 ticks): the newest is at most 20 ticks old.
     assert!((10_030..=10_050).contains(&s.ticks), "{}", s.ticks);
+    // The watchdog period is on the bus for every client to read, not only in the manifest.
+    // (Checked last: reading service records draws on the thread's pre-allocated pool.)
+    assert_eq!(
+        bus.command_watchdog("arm").unwrap(),
+        Some(Some(std::time::Duration::from_millis(50)))
+    );
 }
 
 /// The hardware edge allocates nothing either: a Dynamixel bus whose port vanishes (every read

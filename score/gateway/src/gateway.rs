@@ -373,7 +373,11 @@ impl Gateway {
             self.publisher = Some(p);
         }
         if self.commands.is_none() {
-            self.commands = Some(CommandReceiver::create(&self.bus, &subsystem)?);
+            self.commands = Some(CommandReceiver::with_watchdog(
+                &self.bus,
+                &subsystem,
+                self.opts.watchdog,
+            )?);
         }
         Ok(())
     }

@@ -207,6 +207,11 @@ fn the_watchdog_makes_a_duty_safe_when_the_controller_stops() {
     let bus = Bus::open(&domain, "score-gateway-test").unwrap();
     let mut pwm4 = StateSubscriber::new(&bus, "score-rp2040/PWM4").unwrap();
     let mut ctl = Controller::new(&bus);
+    // The period is announced on the bus (the commands service's `conductor.watchdog_ms`).
+    assert_eq!(
+        bus.command_watchdog("score-rp2040").unwrap(),
+        Some(Some(Duration::from_secs(1)))
+    );
 
     // Commands every 50 ms for two timeouts and until the pin shows 60 %: the watchdog must not
     // fire. (The pin is measured while commands go on, so a slow emulator cannot see the

@@ -2,7 +2,8 @@
 //! in seconds on a fresh machine.
 //!
 //! * `setup` — installs what the test suite needs and the machine may lack: the Python venv with
-//!   the interop packages (`tools/python-requirements.txt`), the `thumbv6m-none-eabi` target,
+//!   the interop packages (`tools/python-requirements.txt`) and the `conductor` Python package
+//!   (`python/`, editable), the `thumbv6m-none-eabi` target,
 //!   socat (Debian) and the emulator harness's npm packages (`npm ci`).
 //! * `test`  — `setup`, then the Score firmware build, every test of the workspace (the firmware
 //!   tests boot that image in the rp2040js emulator; tools/cli's `bench` test runs
@@ -144,13 +145,22 @@ fn rust_target(target: &str) -> Result {
     run(Command::new("rustup").args(["target", "add", target]))
 }
 
-/// `.venv` with the pinned interop packages; reinstalled only when the requirements change.
+/// `.venv` with the pinned interop packages and the `conductor` package of `python/` (editable,
+/// so the venv runs this checkout's code); reinstalled only when the requirements, the package's
+/// `pyproject.toml` or the checkout it points at change.
 fn python_venv() -> Result<PathBuf> {
     let root = root();
     let venv = root.join(".venv");
     let python = venv.join("bin/python");
     let reqs = root.join("tools/python-requirements.txt");
-    let wanted = std::fs::read_to_string(&reqs).map_err(|e| format!("{}: {e}", reqs.display()))?;
+    let package = root.join("python");
+    let pyproject = package.join("pyproject.toml");
+    let wanted = [&reqs, &pyproject]
+        .iter()
+        .map(|p| std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display())))
+        .collect::<Result<Vec<_>>>()?
+        .join("")
+        + &package.display().to_string();
     let stamp = venv.join("conductor-requirements.txt");
     if std::fs::read_to_string(&stamp).ok().as_deref() == Some(wanted.as_str()) && python.exists() {
         return Ok(python);
@@ -168,6 +178,16 @@ fn python_venv() -> Result<PathBuf> {
             "-r",
         ])
         .arg(&reqs))?;
+    run(Command::new(&python)
+        .args([
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "-e",
+        ])
+        .arg(&package))?;
     std::fs::write(&stamp, wanted).map_err(|e| e.to_string())?;
     Ok(python)
 }
