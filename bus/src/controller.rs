@@ -134,8 +134,29 @@ impl Controller {
     /// Sends every buffered setpoint: one frame per subsystem. Returns the number of setpoints
     /// sent; the buffer is empty afterwards.
     pub fn send_ctrl(&mut self) -> Result<usize> {
+        self.send_frames().map(|(sent, _)| sent)
+    }
+
+    /// As [`send_ctrl`](Self::send_ctrl), but a frame that reached no receiver (no executor
+    /// listens on the subsystem's commands service) is [`BusError::NotDelivered`], after every
+    /// frame was sent.
+    pub fn send_ctrl_checked(&mut self) -> Result<usize> {
+        let (sent, undelivered) = self.send_frames()?;
+        match undelivered {
+            Some(i) => Err(BusError::NotDelivered {
+                subsystem: self.outboxes[i].subsystem.clone(),
+                domain: self.bus.domain().name().into(),
+            }),
+            None => Ok(sent),
+        }
+    }
+
+    /// Sends the buffered frames; returns the setpoints sent and the first outbox whose frame
+    /// reached no receiver (an index, so that sending never allocates).
+    fn send_frames(&mut self) -> Result<(usize, Option<usize>)> {
         let mut sent = 0;
-        for ob in &mut self.outboxes {
+        let mut undelivered = None;
+        for (i, ob) in self.outboxes.iter_mut().enumerate() {
             if ob.frame.count == 0 {
                 continue;
             }
@@ -146,14 +167,17 @@ impl Controller {
                 .port
                 .loan_uninit()
                 .map_err(|e| BusError::iox("loaning a command frame", e))?;
-            sample
+            let receivers = sample
                 .write_payload(ob.frame)
                 .send()
                 .map_err(|e| BusError::iox("sending a command frame", e))?;
+            if receivers == 0 && undelivered.is_none() {
+                undelivered = Some(i);
+            }
             sent += ob.frame.count as usize;
             ob.frame.clear();
         }
-        Ok(sent)
+        Ok((sent, undelivered))
     }
 
     /// Drops every buffered setpoint without sending.

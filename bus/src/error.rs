@@ -45,6 +45,18 @@ pub enum BusError {
         /// The service that was looked for.
         service: String,
     },
+    /// A command frame reached no receiver: no executor listens on the subsystem's commands
+    /// service (it stopped, or the states belong to something that takes no commands).
+    #[error(
+        "not delivered: no executor listens for commands of subsystem {subsystem:?} in domain \
+         {domain:?} (its executor is not running, or the state's owner takes no commands)"
+    )]
+    NotDelivered {
+        /// The subsystem.
+        subsystem: String,
+        /// The domain.
+        domain: String,
+    },
     /// A service of that name exists but is not a Conductor service of the expected kind/type.
     #[error("service {service:?} is not a Conductor {expected}: {found}")]
     WrongServiceType {

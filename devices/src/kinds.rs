@@ -698,7 +698,10 @@ pub const KINDS: &[KindSpec] = &[
             doc: "first-order lag between setpoint and sampled value (s); 0 = immediate",
         }],
         doc: "Simulated hardware that answers a sample request with the last setpoint written to \
-              the same device, optionally through a first-order lag (a stand-in for a servo).",
+              the same device, optionally through a first-order lag (a stand-in for a servo). \
+              Each device starts where its state reads a value inside the state's limits (0 when \
+              the limits allow it, else their middle or the one finite limit), not at 0 in device \
+              units.",
     },
     KindSpec {
         stage: Stage::Protocol,

@@ -80,6 +80,12 @@ pub enum Op {
         /// New value.
         value: f64,
     },
+    /// Simulated hardware: the channel starts at this value (where a simulated servo is when
+    /// the executor starts: no lag towards it, unlike [`Op::Set`]).
+    Place {
+        /// Starting value.
+        value: f64,
+    },
 }
 
 /// A downstream request, tagged by its device.

@@ -292,4 +292,10 @@ pub trait Device {
     fn describe(&self) -> String {
         String::new()
     }
+    /// Simulated devices: start `channel` at `value` (device units) rather than at the
+    /// simulator's 0, so that a simulated joint starts inside its state's limits. Real devices
+    /// are where they are and ignore it. Called once, at set-up.
+    fn start_at(&mut self, channel: usize, value: f64) {
+        let _ = (channel, value);
+    }
 }

@@ -301,6 +301,11 @@ impl Stages {
         let mut devices = Vec::with_capacity(sub.devices.len());
         for (i, d) in sub.devices.iter().enumerate() {
             let mut dev = kinds::build_device(&d.kind, &d.params, d.credential)?;
+            // A simulated device starts where its state reads a value inside the state's
+            // limits (real ones ignore this: they are where they are).
+            for s in sub.states.iter().filter(|s| s.device == i) {
+                dev.start_at(s.channel, s.calibration.to_device(rest(s.min, s.max)));
+            }
             let sampled: Vec<usize> = sub
                 .states
                 .iter()
@@ -1048,4 +1053,18 @@ fn capacities(sub: &Subsystem) -> Vec<Capacity> {
             }
         })
         .collect()
+}
+
+/// Where a simulated state starts: 0 when the limits allow it, else the middle of finite
+/// limits, else the finite one.
+fn rest(min: f64, max: f64) -> f64 {
+    if (min..=max).contains(&0.0) {
+        0.0
+    } else if min.is_finite() && max.is_finite() {
+        min + (max - min) / 2.0
+    } else if min.is_finite() {
+        min
+    } else {
+        max
+    }
 }

@@ -34,6 +34,8 @@ pub enum SimKind {
     Set,
     /// Answer to a sample request.
     Value,
+    /// Starting value: the device is there at once (hardware that plays values back).
+    Place,
 }
 
 /// Protocol stage for the simulated bus: one word per request, replies matched by credential.
@@ -70,6 +72,12 @@ impl Protocol for SimProtocol {
                 Op::Set { value } => SimWord {
                     cred: r.cred,
                     kind: SimKind::Set,
+                    value,
+                    t_ns: r.t_request_ns,
+                },
+                Op::Place { value } => SimWord {
+                    cred: r.cred,
+                    kind: SimKind::Place,
                     value,
                     t_ns: r.t_request_ns,
                 },
@@ -263,6 +271,10 @@ impl Hardware for LoopbackHardware {
                         slot.2 = w.value;
                     }
                 }
+                SimKind::Place => {
+                    slot.1 = w.value;
+                    slot.2 = w.value;
+                }
                 SimKind::Sample => {
                     let reply = SimWord {
                         kind: SimKind::Value,
@@ -294,6 +306,8 @@ pub struct SimDevice {
     cred: Credential,
     pending: Option<f64>,
     last: f64,
+    /// Where the simulated hardware should start it, sent ahead of its first request.
+    start: Option<f64>,
 }
 
 impl SimDevice {
@@ -303,6 +317,20 @@ impl SimDevice {
             cred,
             pending: None,
             last: 0.0,
+            start: None,
+        }
+    }
+
+    /// Sends the starting value once, ahead of anything else.
+    fn place(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
+        if let Some(value) = self.start {
+            if out
+                .push(Request::new(self.cred, Op::Place { value }, ctx))
+                .is_ok()
+            {
+                self.start = None;
+                self.last = value;
+            }
         }
     }
 }
@@ -317,6 +345,7 @@ impl Device for SimDevice {
     }
 
     fn sample(&mut self, _channel: usize, ctx: TickCtx, out: &mut Bounded<Request>) {
+        self.place(ctx, out);
         let _ = out.push(Request::new(self.cred, Op::Sample, ctx));
     }
 
@@ -325,6 +354,7 @@ impl Device for SimDevice {
     }
 
     fn flush(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) {
+        self.place(ctx, out);
         if let Some(value) = self.pending.take() {
             let _ = out.push(Request::new(self.cred, Op::Set { value }, ctx));
         }
@@ -340,6 +370,10 @@ impl Device for SimDevice {
             _ => return,
         };
         let _ = out.push(Update::from_reply(reply, 0, value, false));
+    }
+
+    fn start_at(&mut self, _channel: usize, value: f64) {
+        self.start = Some(value);
     }
 
     fn safe(&mut self, action: SafeAction, ctx: TickCtx, out: &mut Bounded<Request>) {

@@ -87,7 +87,7 @@ Examples:\n  conductor set leg/knee 0.5\n  conductor set leg/knee -3 --clamp"
     Set(SetArgs),
     /// Print samples of the states matching a name or glob, optionally rate-limited.
     #[command(
-        after_help = "Examples:\n  conductor echo leg/knee\n  conductor echo 'leg/*' --rate 5 --count 50"
+        after_help = "Examples:\n  conductor echo leg/knee\n  conductor echo 'leg/*' --rate 5 --count 50\n  conductor echo 'leg/*' --plot --window 5"
     )]
     Echo(EchoArgs),
     /// Executor health per subsystem: rate, lateness, misses, stale states, devices, buses,
@@ -134,7 +134,7 @@ Examples:\n  conductor udp-gateway\n  conductor udp-gateway 'leg/*' --base-port 
     UdpGateway(UdpArgs),
     /// Plot recorded states against time into a PNG (or SVG) image.
     #[command(
-        after_help = "Example:\n  conductor plot run.mcap 'leg/*' -o leg.png --title 'Robot Joint State'"
+        after_help = "Examples:\n  conductor plot run.mcap 'leg/*' -o leg.png --title 'Robot Joint State'\n  conductor plot run.mcap 'leg/*' -o leg.png --flags"
     )]
     Plot(PlotArgs),
     /// Benchmark suite: the thesis' stress test at 50 Hz–10 kHz beside cyclictest and the IPC
@@ -227,6 +227,13 @@ pub struct EchoArgs {
     /// Wait this long for a matching state to appear (seconds).
     #[arg(long, default_value_t = 5.0, value_name = "S")]
     pub wait: f64,
+    /// A live chart in the terminal instead of lines: the last --window seconds of every
+    /// matching state, with its value and flags (--count then counts frames).
+    #[arg(long, conflicts_with_all = ["json", "rate"])]
+    pub plot: bool,
+    /// Seconds of history the --plot chart shows.
+    #[arg(long, default_value_t = 10.0, value_name = "S", requires = "plot")]
+    pub window: f64,
 }
 
 /// `conductor top`.
@@ -336,6 +343,10 @@ pub struct PlotArgs {
     /// Image height in pixels.
     #[arg(long, default_value_t = 700)]
     pub height: u32,
+    /// Add a panel below, on the same time axis: when each state's flags (clamped, rejected,
+    /// stale, tripped, ...) were set, one row per state and flag.
+    #[arg(long)]
+    pub flags: bool,
 }
 
 /// `conductor bench`.

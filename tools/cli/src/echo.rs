@@ -7,7 +7,7 @@ use conductor_bus::{status, Bus, StateSample, StateSubscriber};
 
 use crate::cli::EchoArgs;
 use crate::error::{CliError, Result};
-use crate::{out, select};
+use crate::{live_plot, out, select};
 
 struct Echoed {
     sub: StateSubscriber,
@@ -42,7 +42,8 @@ fn line(e: &Echoed, s: &StateSample, json: bool) -> String {
     }
 }
 
-/// Runs until `--count` lines, `--duration`, or Ctrl-C; returns the number of lines printed.
+/// Runs until `--count` lines, `--duration`, or Ctrl-C; returns the number of lines printed
+/// (with `--plot`: the live chart of [`live_plot`], and the number of frames drawn).
 pub fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
     if let Some(r) = args.rate {
         if !(r > 0.0 && r.is_finite()) {
@@ -50,6 +51,16 @@ pub fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
         }
     }
     let min_gap_ns = args.rate.map_or(0, |r| (1e9 / r) as u64);
+    if args.plot {
+        let mut states = Vec::new();
+        for info in select::states_wait(bus, &args.pattern, args.wait)? {
+            let name = info.qualified_name();
+            // A queue deep enough for 1 kHz states between two 10 Hz redraws.
+            let sub = StateSubscriber::with_buffer(bus, &name, 256)?;
+            states.push(live_plot::Plotted::new(name, info.meta.units.clone(), sub));
+        }
+        return live_plot::run(states, args);
+    }
     let mut subs = Vec::new();
     for info in select::states_wait(bus, &args.pattern, args.wait)? {
         let name = info.qualified_name();

@@ -184,7 +184,8 @@ pub fn set(bus: &Bus, args: &SetArgs) -> Result<()> {
     let mut ctl = Controller::new(bus);
     ctl.add_ctrl(&name, clamped)?;
     let t_send = monotonic_ns();
-    ctl.send_ctrl()?;
+    // A frame nobody receives was not delivered: say so and fail rather than print "sent".
+    ctl.send_ctrl_checked()?;
     let note = if was_clamped {
         format!(" (clamped from {})", out::value(args.value))
     } else {

@@ -3,7 +3,8 @@
 //! The `conductor` command line. Each subcommand is a module with a `run` function taking the
 //! parsed arguments (see [`cli`]) and a [`Bus`](conductor_bus::Bus) on the chosen domain:
 //!
-//! * inspection: [`list`], [`get_set`] (`get`, `set`), [`echo`], [`top`];
+//! * inspection: [`list`], [`get_set`] (`get`, `set`), [`echo`] (with [`live_plot`] for
+//!   `--plot`), [`top`];
 //! * logging: [`record`] and [`replay`] over the MCAP layout in [`recording`], and [`plot`];
 //! * the thesis' external interface: [`udp`] (`udp-gateway`);
 //! * the benchmark suite: [`bench`] (`bench`, over `conductor_benches::suite`).
@@ -19,6 +20,7 @@ pub mod error;
 pub mod get_set;
 pub mod launch;
 pub mod list;
+pub mod live_plot;
 pub mod out;
 pub mod plot;
 mod probe;

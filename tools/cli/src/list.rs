@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 use conductor_bus::{monotonic_ns, Bus};
 
 use crate::cli::ListArgs;
-use crate::error::Result;
+use crate::error::{CliError, Result};
 use crate::out;
 use crate::probe::Probe;
 use crate::select;
@@ -14,14 +14,26 @@ use crate::select;
 pub fn run(bus: &Bus, args: &ListArgs) -> Result<usize> {
     let states = select::states(bus, args.pattern.as_deref().unwrap_or("*"))?;
     if states.is_empty() {
-        eprintln!(
-            "no states in domain {:?}{}",
-            bus.domain().name(),
-            args.pattern
-                .as_ref()
-                .map_or(String::new(), |p| format!(" matching {p:?}"))
-        );
-        return Ok(0);
+        // A pattern that matches nothing is an error (like `ls missing`); an empty domain
+        // listed without a pattern is an empty answer, said on stderr.
+        let Some(pattern) = &args.pattern else {
+            eprintln!(
+                "no states in domain {:?} (is the executor running, in this domain?)",
+                bus.domain().name()
+            );
+            return Ok(0);
+        };
+        let known = bus
+            .list_states()?
+            .iter()
+            .take(12)
+            .map(conductor_bus::StateInfo::qualified_name)
+            .collect();
+        return Err(CliError::NoMatch {
+            pattern: pattern.clone(),
+            domain: bus.domain().name().into(),
+            known,
+        });
     }
     let probe = Probe::new(bus.domain())?;
     // A service that vanished between listing and opening is shown without writer and age.

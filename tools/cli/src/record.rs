@@ -16,6 +16,9 @@ use crate::select;
 /// Per-subscriber queue: at 1 kHz this covers a quarter second of the recorder not running.
 const QUEUE: usize = 256;
 
+/// How often the open chunk is closed and synced to the disk: what a killed recorder loses.
+const FLUSH_EVERY: Duration = Duration::from_secs(1);
+
 /// What a recording contains.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordReport {
@@ -57,7 +60,8 @@ fn progress(args: &RecordArgs) -> Option<ProgressBar> {
 }
 
 /// Records until `--duration` or Ctrl-C/SIGTERM; the file is finalised (summary, indexes,
-/// footer) either way.
+/// footer) either way. Exactly the samples published within the window are written (see the
+/// summary's `window_*` metadata); a chunk is closed and synced every second.
 pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
     if let Some(d) = args.duration {
         if !(d > 0.0 && d.is_finite()) {
@@ -77,6 +81,8 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
     let mut tracks = Vec::with_capacity(states.len());
     let path = &args.output;
     let file = File::create(path).map_err(|e| CliError::io(path, e))?;
+    // A second handle on the file, to sync what each flush wrote while the writer owns it.
+    let sync = file.try_clone().map_err(|e| CliError::io(path, e))?;
     let mcap_err = |e: mcap::McapError| CliError::mcap(path, e);
     let mut w = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
@@ -109,6 +115,7 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
             written: 0,
         });
     }
+    // The recording window opens here (see below): the start metadata states it.
     let started_mono = monotonic_ns();
     let started_unix = unix_ns();
     w.write_metadata(&mcap::records::Metadata {
@@ -122,7 +129,8 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
                 "recorder".into(),
                 concat!("conductor-cli ", env!("CARGO_PKG_VERSION")).into(),
             ),
-            // log_time is CLOCK_MONOTONIC; this pair maps it to wall-clock time.
+            // log_time is CLOCK_MONOTONIC; this pair maps it to wall-clock time. The monotonic
+            // one is also where the window opens: no sample published before it is written.
             ("start_monotonic_ns".into(), started_mono.to_string()),
             ("start_unix_ns".into(), started_unix.to_string()),
         ]),
@@ -144,16 +152,32 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
 
     let bar = progress(args);
     let start = Instant::now();
-    let end = args.duration.map(|d| start + Duration::from_secs_f64(d));
+    // The window is exact by publish time: a sample is written when it was published at or
+    // after `window_start` and before `window_end` (the duration's end, or the moment a stop
+    // was seen). Samples published before the start (each subscriber is handed the newest
+    // sample when it connects, and more queue up while the file is set up) are left out.
+    let window_start = started_mono;
+    let mut window_end = args
+        .duration
+        .map_or(u64::MAX, |d| window_start + (d * 1e9).round() as u64);
     let mut body = Vec::with_capacity(160);
     let mut messages = 0u64;
+    let mut before = 0u64;
     let mut last_draw = start;
-    let stopped_by = loop {
+    let mut last_flush = start;
+    let mut stopped_by = None;
+    loop {
         for t in &mut tracks {
             while let Some(s) = t.sub.receive()? {
+                if s.t_publish_ns < window_start {
+                    before += 1;
+                    continue;
+                }
+                if s.t_publish_ns >= window_end {
+                    continue;
+                }
                 body.clear();
-                serde_json::to_writer(&mut body, &Message::of(&s))
-                    .expect("a Message always serialises");
+                recording::write_message(&mut body, &Message::of(&s));
                 w.write_to_known_channel(
                     &mcap::records::MessageHeader {
                         channel_id: t.channel,
@@ -168,12 +192,29 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
                 messages += 1;
             }
         }
-        let now = Instant::now();
-        if end.is_some_and(|e| now >= e) {
-            break "duration";
+        if stopped_by.is_some() {
+            // That drain after the end took in every sample published before it.
+            break;
         }
-        if conductor_bus::shutdown::requested() {
-            break "signal";
+        let now = Instant::now();
+        if monotonic_ns() >= window_end {
+            stopped_by = Some("duration");
+        } else if conductor_bus::shutdown::requested() {
+            window_end = monotonic_ns();
+            stopped_by = Some("signal");
+        }
+        if stopped_by.is_some() {
+            // A publisher stamps t_publish_ns just before it sends: let one that stamped a time
+            // inside the window finish sending before the last drain.
+            std::thread::sleep(Duration::from_millis(5));
+            continue;
+        }
+        if now - last_flush >= FLUSH_EVERY {
+            // Close the chunk and push it to the disk, so that a recorder killed (SIGKILL,
+            // power loss) loses at most this interval: the file reads up to the last chunk.
+            last_flush = now;
+            w.flush().map_err(mcap_err)?;
+            sync.sync_data().map_err(|e| CliError::io(path, e))?;
         }
         if let Some(b) = &bar {
             if now - last_draw > Duration::from_millis(100) {
@@ -183,7 +224,8 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
             }
         }
         std::thread::sleep(Duration::from_millis(1));
-    };
+    }
+    let stopped_by = stopped_by.expect("the loop ends only once stopped");
     if let Some(b) = &bar {
         b.finish_and_clear();
     }
@@ -198,6 +240,10 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
             format!("{:.6}", start.elapsed().as_secs_f64()),
         ),
         ("messages".into(), messages.to_string()),
+        // The publish-time window [start, end) of the written samples, CLOCK_MONOTONIC ns.
+        ("window_start_monotonic_ns".into(), window_start.to_string()),
+        ("window_end_monotonic_ns".into(), window_end.to_string()),
+        ("published_before_start".into(), before.to_string()),
     ]);
     for (name, written, missed) in &per_state {
         summary.insert(format!("{name}.messages"), written.to_string());

@@ -41,7 +41,12 @@ pub const SCHEMA: &str = r#"{
   "properties": {
     "value": {
       "type": ["number", "null"],
-      "description": "Value in the state's units (channel metadata 'units'); null encodes NaN or infinity."
+      "description": "Value in the state's units (channel metadata 'units'), the shortest decimal that reads back to the same double; null for NaN or infinity (then 'bits' has it)."
+    },
+    "bits": {
+      "type": "string",
+      "pattern": "^[0-9a-f]{16}$",
+      "description": "Only when value is null: the IEEE 754 bits of the double as 16 hex digits (7ff0000000000000 = +inf, fff0000000000000 = -inf, 7ff8000000000000 = NaN)."
     },
     "status": {
       "type": "integer",
@@ -68,12 +73,17 @@ pub const SCHEMA: &str = r#"{
   "additionalProperties": false
 }"#;
 
-/// The body of one message.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// The body of one message. Every `f64` round-trips bit for bit: finite values are written as
+/// the shortest decimal that reads back exactly (and read with correct rounding), the others as
+/// `null` with their bits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Message {
     /// Value; `None` for NaN/inf (JSON has no such numbers).
     pub value: Option<f64>,
+    /// The bits of a non-finite value, 16 hex digits; absent for finite values.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bits: Option<String>,
     /// Status flags.
     pub status: u32,
     /// Sample time (s).
@@ -87,8 +97,10 @@ pub struct Message {
 impl Message {
     /// The message of a bus sample.
     pub fn of(s: &StateSample) -> Self {
+        let finite = s.value.is_finite();
         Self {
-            value: s.value.is_finite().then_some(s.value),
+            value: finite.then_some(s.value),
+            bits: (!finite).then(|| format!("{:016x}", s.value.to_bits())),
             status: s.status,
             t_sample: s.t_sample_ns as f64 * 1e-9,
             seq: s.seq,
@@ -96,10 +108,25 @@ impl Message {
         }
     }
 
-    /// The value, NaN for `null`.
+    /// The value: the number, else the double of `bits`, else NaN (a `null` without bits).
     pub fn value_or_nan(&self) -> f64 {
-        self.value.unwrap_or(f64::NAN)
+        self.value.unwrap_or_else(|| {
+            self.bits
+                .as_deref()
+                .and_then(|b| u64::from_str_radix(b, 16).ok())
+                .map_or(f64::NAN, f64::from_bits)
+        })
     }
+}
+
+/// Appends the JSON body of `m` to `out`.
+pub fn write_message(out: &mut Vec<u8>, m: &Message) {
+    serde_json::to_writer(out, m).expect("a Message always serialises");
+}
+
+/// Reads a JSON body (decimal floats are read with correct rounding: `float_roundtrip`).
+pub fn read_message(body: &[u8]) -> serde_json::Result<Message> {
+    serde_json::from_slice(body)
 }
 
 /// `/<subsystem>/<state>`.
@@ -243,11 +270,10 @@ impl Recording {
                     i
                 }
             };
-            let body: Message =
-                serde_json::from_slice(&m.data).map_err(|e| CliError::BadRecording {
-                    path: path.into(),
-                    detail: format!("message on {:?}: {e}", m.channel.topic),
-                })?;
+            let body = read_message(&m.data).map_err(|e| CliError::BadRecording {
+                path: path.into(),
+                detail: format!("message on {:?}: {e}", m.channel.topic),
+            })?;
             rec.samples.push(Sample {
                 t_ns: m.log_time,
                 channel: idx,
@@ -284,7 +310,15 @@ mod tests {
             assert!(props.contains_key(k), "{k}");
             assert!(req.contains(&k.as_str()), "{k}");
         }
-        assert_eq!(props.len(), m.as_object().unwrap().len());
+        // `bits` is the one optional field: only non-finite values carry it.
+        assert_eq!(props.len(), m.as_object().unwrap().len() + 1);
+        assert!(props.contains_key("bits") && !req.contains(&"bits"));
+        let inf = StateSample {
+            value: f64::INFINITY,
+            ..Default::default()
+        };
+        let m = serde_json::to_value(Message::of(&inf)).unwrap();
+        assert_eq!(m["bits"], "7ff0000000000000");
     }
 
     #[test]
@@ -297,5 +331,66 @@ mod tests {
         assert!(json.contains("\"value\":null"), "{json}");
         let back: Message = serde_json::from_str(&json).unwrap();
         assert!(back.value_or_nan().is_nan());
+    }
+
+    /// Encodes and decodes `v` as a recording does; returns the bits read back.
+    fn round_trip(v: f64) -> u64 {
+        let s = StateSample {
+            value: v,
+            ..Default::default()
+        };
+        let mut body = Vec::new();
+        write_message(&mut body, &Message::of(&s));
+        read_message(&body).unwrap().value_or_nan().to_bits()
+    }
+
+    #[test]
+    fn every_double_round_trips_bit_for_bit() {
+        // The edges: zeros, subnormals, extremes, infinities, NaNs with sign and payload.
+        let edges = [
+            0.0,
+            -0.0,
+            f64::MIN_POSITIVE,
+            -f64::MIN_POSITIVE,
+            f64::from_bits(1),
+            f64::from_bits(0x000f_ffff_ffff_ffff),
+            f64::MAX,
+            f64::MIN,
+            f64::EPSILON,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            f64::from_bits(0x7ff0_0000_0000_0001),
+            f64::from_bits(0xfff8_dead_beef_0001),
+            0.1,
+            1.0 / 3.0,
+            2.61,
+            9007199254740993.0,
+        ];
+        for v in edges {
+            assert_eq!(round_trip(v), v.to_bits(), "{v:e} ({:016x})", v.to_bits());
+        }
+        // Random bit patterns (every exponent and sign), and the doubles of a sensor's and a
+        // joint's everyday range, where the decimal reader's rounding used to be 1 ULP off.
+        let mut x = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            x
+        };
+        let mut off = 0;
+        for i in 0..200_000 {
+            let v = match i % 2 {
+                0 => f64::from_bits(next()),
+                _ => (next() >> 11) as f64 / (1u64 << 53) as f64 * 200.0 - 100.0,
+            };
+            off += usize::from(round_trip(v) != v.to_bits());
+        }
+        assert_eq!(
+            off, 0,
+            "{off} of 200000 doubles did not come back bit for bit"
+        );
     }
 }

@@ -9,11 +9,12 @@
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
-use conductor_bus::{monotonic_ns, status, Bus, StatePublisher, StateSpec};
+use conductor_bus::{monotonic_ns, status, Bus, StateInfo, StatePublisher, StateSpec};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cli::ReplayArgs;
 use crate::error::{CliError, Result};
+use crate::probe::Probe;
 use crate::recording::Recording;
 use crate::select::Selector;
 
@@ -30,6 +31,65 @@ pub struct ReplayReport {
 struct Route {
     publisher: usize,
     index: usize,
+}
+
+/// Fails, naming them and their writers, when states of the recording are live in the domain:
+/// their services exist with another owner's metadata, and iceoryx2 would refuse to open them
+/// with ours (an `IncompatibleAttributes` error that names neither the state nor the fix).
+fn refuse_live_states(
+    bus: &Bus,
+    subsystems: &[(String, Vec<StateSpec>)],
+    args: &ReplayArgs,
+) -> Result<()> {
+    let live: Vec<StateInfo> = bus
+        .list_states()?
+        .into_iter()
+        .filter(|s| {
+            subsystems
+                .iter()
+                .any(|(sub, specs)| *sub == s.subsystem && specs.iter().any(|p| p.name == s.name))
+        })
+        .collect();
+    let Some(first) = live.first() else {
+        return Ok(());
+    };
+    // Who writes them, when that can be told (a state may vanish meanwhile).
+    let writers = Probe::new(bus.domain())
+        .and_then(|probe| {
+            let names = probe.node_names()?;
+            Ok(probe
+                .open(first)
+                .map(|p| p.writers(&names))
+                .unwrap_or_default())
+        })
+        .unwrap_or_default();
+    let shown: Vec<String> = live.iter().take(6).map(StateInfo::qualified_name).collect();
+    let more = live.len().saturating_sub(shown.len());
+    Err(CliError::Usage(format!(
+        "cannot replay {} into domain {domain:?}: {} recorded state(s) are live there ({}{}){}; \
+         replay into another domain, e.g. `conductor --domain replay replay {}` (subscribers \
+         then use --domain replay or CONDUCTOR_DOMAIN=replay), or leave those states out with \
+         --states",
+        args.file.display(),
+        live.len(),
+        shown.join(", "),
+        if more > 0 {
+            format!(" and {more} more")
+        } else {
+            String::new()
+        },
+        if writers.is_empty() {
+            String::new()
+        } else {
+            format!(
+                ", {} written by {}",
+                first.qualified_name(),
+                writers.join(", ")
+            )
+        },
+        args.file.display(),
+        domain = bus.domain().name(),
+    )))
 }
 
 /// Replays until the end (or, with `--loop`, until Ctrl-C).
@@ -92,6 +152,7 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
         }));
         specs.push(StateSpec::new(c.state.clone(), meta));
     }
+    refuse_live_states(bus, &subsystems, args)?;
     let mut publishers = subsystems
         .iter()
         .map(|(sub, specs)| StatePublisher::create(bus, sub, specs))

@@ -114,7 +114,7 @@ impl Gateway {
                 let sent = self
                     .ctl
                     .add_ctrl(&name, c)
-                    .and_then(|()| self.ctl.send_ctrl());
+                    .and_then(|()| self.ctl.send_ctrl_checked());
                 match sent {
                     Ok(_) => {
                         let text = format!(
