@@ -163,18 +163,24 @@ impl Gateway {
         let mut last_ping = Instant::now();
         while !self.stop.load(Ordering::Relaxed) {
             link.poll()?;
-            while let Some(ev) = link.next_event() {
-                match ev {
-                    Event::Samples { t_us, values, .. } => self.publish(t_us, &values)?,
-                    Event::TableChanged(g) if Some(g) != self.generation => self.sync(link)?,
-                    Event::TableChanged(_) => {}
-                }
-            }
+            self.handle_events(link)?;
             self.forward_commands(link)?;
             self.watchdog(link)?;
             if last_ping.elapsed() >= self.opts.ping {
                 self.ping(link)?;
                 last_ping = Instant::now();
+            }
+        }
+        Ok(())
+    }
+
+    /// Publishes the samples and acts on the table changes the link has queued.
+    fn handle_events(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+        while let Some(ev) = link.next_event() {
+            match ev {
+                Event::Samples { t_us, values, .. } => self.publish(t_us, &values)?,
+                Event::TableChanged(g) if Some(g) != self.generation => self.sync(link)?,
+                Event::TableChanged(_) => {}
             }
         }
         Ok(())
@@ -459,7 +465,13 @@ impl Gateway {
             value,
             generation,
         }) {
-            Ok(_) => Ok(true),
+            Ok(_) => {
+                // Samples queued while waiting for the answer were taken before the board
+                // applied the value: publish them under the flags they were taken with, before
+                // the caller flags the state (WATCHDOG, CLAMPED) for the new value.
+                self.handle_events(link)?;
+                Ok(true)
+            }
             Err(GatewayError::Board { stale, message }) => {
                 eprintln!(
                     "score-gateway: set {} = {value}: {message}",

@@ -13,22 +13,25 @@
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
 
-static ALLOCS: AtomicU64 = AtomicU64::new(0);
-thread_local!(static MEASURING: Cell<bool> = const { Cell::new(false) });
+// Both per thread: tests of one binary run on parallel threads, and a count shared between them
+// would charge one test's allocations to another that measures at the same time.
+thread_local! {
+    static MEASURING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCS: Cell<u64> = const { Cell::new(0) };
+}
 
 /// The system allocator, counting `alloc` and `realloc` calls made inside [`measure`].
 pub struct Counting;
 
 fn count() {
     if MEASURING.with(Cell::get) {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        ALLOCS.with(|a| a.set(a.get() + 1));
     }
 }
 
 // SAFETY: every call is forwarded unchanged to the system allocator; counting touches only an
-// atomic and a const-initialised thread-local, neither of which allocates.
+// two const-initialised thread-locals, neither of which allocates.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, l: Layout) -> *mut u8 {
         count();
@@ -54,9 +57,9 @@ unsafe impl GlobalAlloc for Counting {
 /// Runs `f` and returns its result with the number of allocations this thread made meanwhile.
 /// Meaningful only in a test binary whose `#[global_allocator]` is [`Counting`].
 pub fn measure<R>(f: impl FnOnce() -> R) -> (R, u64) {
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = ALLOCS.with(Cell::get);
     MEASURING.with(|m| m.set(true));
     let r = f();
     MEASURING.with(|m| m.set(false));
-    (r, ALLOCS.load(Ordering::Relaxed) - before)
+    (r, ALLOCS.with(Cell::get) - before)
 }
