@@ -30,7 +30,7 @@ fn count() {
     }
 }
 
-// SAFETY: every call is forwarded unchanged to the system allocator; counting touches only an
+// SAFETY: every call is forwarded unchanged to the system allocator; counting touches only
 // two const-initialised thread-locals, neither of which allocates.
 unsafe impl GlobalAlloc for Counting {
     unsafe fn alloc(&self, l: Layout) -> *mut u8 {
