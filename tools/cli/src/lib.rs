@@ -6,6 +6,7 @@
 //! * inspection: [`list`], [`get_set`] (`get`, `set`), [`echo`], [`top`];
 //! * logging: [`record`] and [`replay`] over the MCAP layout in [`recording`], and [`plot`];
 //! * the thesis' external interface: [`udp`] (`udp-gateway`);
+//! * the live view in Foxglove: [`view`] (over `conductor-view`);
 //! * the benchmark suite: [`bench`] (`bench`, over `conductor_benches::suite`).
 //!
 //! Long-running commands stop cleanly on Ctrl-C/SIGTERM ([`stop`]).
@@ -28,6 +29,7 @@ pub mod replay;
 pub mod select;
 pub mod top;
 pub mod udp;
+pub mod view;
 
 use clap::CommandFactory;
 use conductor_bus::{Bus, Domain};
@@ -91,6 +93,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::UdpGateway(a) => {
             install_stop()?;
             udp::run(&bus("udp-gateway")?, a).map(drop)
+        }
+        Command::View(a) => {
+            install_stop()?;
+            view::run(&bus("view")?, a).map(drop)
         }
         Command::Plot(a) => plot::run(a).map(drop),
         Command::Completions { shell } => {
