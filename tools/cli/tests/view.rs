@@ -419,3 +419,104 @@ fn new_states_appear_and_clamp_sends_the_nearest_limit() {
     drop(leg);
 }
 
+/// The pids of live processes whose command line has every one of `args`.
+fn pids_with(args: &[&str]) -> Vec<i32> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<i32>() else {
+            continue;
+        };
+        let Ok(cmd) = std::fs::read(e.path().join("cmdline")) else {
+            continue;
+        };
+        let argv: Vec<String> = cmd
+            .split(|b| *b == 0)
+            .map(|a| String::from_utf8_lossy(a).into_owned())
+            .collect();
+        if args.iter().all(|a| argv.iter().any(|x| x == a)) {
+            out.push(pid);
+        }
+    }
+    out
+}
+
+/// A free TCP port on loopback (free when checked; the view binds it next).
+fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn connect_with_retry(url: &str) -> Fox {
+    let end = Instant::now() + Duration::from_secs(30);
+    loop {
+        let addr = url.strip_prefix("ws://").unwrap();
+        if TcpStream::connect(addr).is_ok() {
+            return Fox::connect(url);
+        }
+        assert!(Instant::now() < end, "nothing listens on {url}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn a_manifest_view_is_launched_and_restarted_by_the_launcher() {
+    let d = Domain::unique("view-launch").unwrap();
+    let dir = tempdir("view-launch");
+    let port = free_tcp_port();
+    let robot =
+        std::fs::read_to_string(workspace().join("executors/tests/manifests/two-subsystems.toml"))
+            .unwrap();
+    let manifest = dir.join("robot.toml");
+    std::fs::write(
+        &manifest,
+        format!("{robot}\n[view]\nlisten = \"127.0.0.1:{port}\"\n"),
+    )
+    .unwrap();
+    let out = ok(conductor(&d).arg("launch").arg(&manifest).arg("--check"));
+    assert!(out.contains("a view"), "{out}");
+    let launcher = Bg::spawn(
+        conductor(&d)
+            .arg("launch")
+            .arg(&manifest)
+            .args(["--no-rt", "--quiet"]),
+    );
+    let url = format!("ws://127.0.0.1:{port}");
+    let mut fox = connect_with_retry(&url);
+    fox.advertised(&["/arm/j0", "/sensors/c", "/arm/stats"]);
+    drop(fox);
+
+    // The view is the launcher's child, on the manifest's domain; killed, it is restarted.
+    let view_args = ["view", "--domain", d.name(), "--listen"];
+    let pids = pids_with(&view_args);
+    assert_eq!(pids.len(), 1, "one view process: {pids:?}");
+    // SAFETY: kill(2) on the view process found above (a grandchild of this test).
+    unsafe { libc::kill(pids[0], libc::SIGKILL) };
+    let end = Instant::now() + Duration::from_secs(30);
+    let mut fox = loop {
+        let now = pids_with(&view_args);
+        if now.len() == 1 && now[0] != pids[0] {
+            break connect_with_retry(&url);
+        }
+        assert!(Instant::now() < end, "the view was not restarted");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    let channels = fox.advertised(&["/arm/j3"]);
+    fox.send(json!({"op": "subscribe", "subscriptions": [
+        {"id": 1, "channelId": channel(&channels, "/arm/j3")["id"].clone()},
+    ]}));
+    sample(&mut fox, 1, "a j3 sample after the restart", |b| {
+        b["unit"] == "rad"
+    });
+    drop(fox);
+
+    // An orderly stop ends the view too.
+    let (clean, err) = launcher.interrupt();
+    assert!(clean, "{err}");
+    assert!(err.contains("and the view stopped"), "{err}");
+    assert!(err.contains("restarting the view (restart 1"), "{err}");
+    assert!(pids_with(&view_args).is_empty());
+    let _ = std::fs::remove_dir_all(dir);
+}
