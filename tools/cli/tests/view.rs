@@ -29,8 +29,12 @@ enum Msg {
 struct Fox {
     ws: WebSocket<TcpStream>,
     protocol: String,
-    /// Status messages seen so far (they may arrive between the messages a step waits for).
+    /// Status messages and parameter updates seen so far (they may arrive while a step waits
+    /// for something else).
     statuses: Vec<Value>,
+    updates: Vec<Value>,
+    /// Subscriptions asked for: (subscription id, channel id).
+    subscriptions: Vec<(u32, u64)>,
 }
 
 impl Fox {
@@ -53,11 +57,31 @@ impl Fox {
             ws,
             protocol,
             statuses: Vec::new(),
+            updates: Vec::new(),
+            subscriptions: Vec::new(),
         }
     }
 
     fn send(&mut self, v: Value) {
         self.ws.send(Message::text(v.to_string())).unwrap();
+    }
+
+    /// Subscribes `(subscription id, channel)` pairs.
+    fn subscribe(&mut self, subs: &[(u32, &Value)]) {
+        let list: Vec<(u32, u64)> = subs
+            .iter()
+            .map(|(id, c)| (*id, c["id"].as_u64().unwrap()))
+            .collect();
+        self.subscriptions.extend(&list);
+        self.send_subscribe(&list);
+    }
+
+    fn send_subscribe(&mut self, list: &[(u32, u64)]) {
+        let subs: Vec<Value> = list
+            .iter()
+            .map(|(id, c)| json!({"id": id, "channelId": c}))
+            .collect();
+        self.send(json!({"op": "subscribe", "subscriptions": subs}));
     }
 
     /// Client message data on client channel `channel`.
@@ -73,7 +97,28 @@ impl Fox {
             Ok(Message::Text(t)) => {
                 let v: Value = serde_json::from_str(t.as_str()).unwrap();
                 if v["op"] == "status" {
+                    // foxglove 0.30.3 sends a channel's advertisement before it records the
+                    // channel for the client, so a client that subscribes at once may be told
+                    // the channel is unknown: subscribe again, as a client should.
+                    let msg = v["message"].as_str().unwrap_or("");
+                    if let Some(id) = msg.strip_prefix("Unknown channel ID: ") {
+                        let id: u64 = id.trim().parse().unwrap();
+                        let again: Vec<(u32, u64)> = self
+                            .subscriptions
+                            .iter()
+                            .copied()
+                            .filter(|(_, c)| *c == id)
+                            .collect();
+                        if !again.is_empty() {
+                            std::thread::sleep(Duration::from_millis(20));
+                            self.send_subscribe(&again);
+                            return None;
+                        }
+                    }
                     self.statuses.push(v.clone());
+                }
+                if v["op"] == "parameterValues" && v.get("id").is_none() {
+                    self.updates.push(v.clone());
                 }
                 Some(Msg::Json(v))
             }
@@ -142,6 +187,24 @@ impl Fox {
             }
             _ => None,
         })
+    }
+
+    /// The first parameter update (seen or to come) that gives `name` the value `value`.
+    fn update(&mut self, name: &str, value: f64) {
+        let hit = |v: &Value| param(v, name).is_some_and(|p| p["value"] == value);
+        if self.updates.iter().any(hit) {
+            return;
+        }
+        self.until(
+            10,
+            &format!("a parameter update of {name} to {value}"),
+            |m| match m {
+                Msg::Json(v) if v["op"] == "parameterValues" && v.get("id").is_none() && hit(v) => {
+                    Some(())
+                }
+                _ => None,
+            },
+        )
     }
 
     /// Channels advertised until every topic of `topics` is (topic → channel).
@@ -279,13 +342,13 @@ fn foxglove_sees_a_launched_robot_and_sets_through_the_checks_of_set() {
     assert_eq!(stats["schemaName"], "conductor.ExecutorStats");
 
     // Subscribe to a joint, a sensor and the arm's stats.
-    let id = |t: &str| channel(&channels, t)["id"].clone();
-    fox.send(json!({"op": "subscribe", "subscriptions": [
-        {"id": 1, "channelId": id("/arm/j3")},
-        {"id": 2, "channelId": id("/sensors/a")},
-        {"id": 3, "channelId": id("/arm/stats")},
-        {"id": 4, "channelId": id("/arm/j2")},
-    ]}));
+    let ch = |t: &str| channel(&channels, t);
+    fox.subscribe(&[
+        (1, ch("/arm/j3")),
+        (2, ch("/sensors/a")),
+        (3, ch("/arm/stats")),
+        (4, ch("/arm/j2")),
+    ]);
     let (time, s) = sample(&mut fox, 2, "a sensor sample", |_| true);
     assert_eq!(s["unit"], "");
     assert!(s["value"].as_f64().unwrap().abs() <= 1.0, "{s}");
@@ -324,12 +387,7 @@ fn foxglove_sees_a_launched_robot_and_sets_through_the_checks_of_set() {
     assert_eq!(j3["unit"], "rad");
     assert_eq!(j3["flags"]["rejected"], false);
     // Parameter subscribers hear of it.
-    fox.until(10, "a parameter update of arm/j3", |m| match m {
-        Msg::Json(v) if v["op"] == "parameterValues" && v.get("id").is_none() => {
-            param(v, "arm/j3").filter(|p| p["value"] == 1.25).map(drop)
-        }
-        _ => None,
-    });
+    fox.update("arm/j3", 1.25);
 
     // Out of the limits: refused like `conductor set` without --clamp; nothing is sent.
     fox.send(json!({"op": "setParameters", "id": "s2",
@@ -398,9 +456,7 @@ fn new_states_appear_and_clamp_sends_the_nearest_limit() {
         channel(&channels, "/leg/knee")["schemaName"],
         "conductor.LiveSample"
     );
-    fox.send(json!({"op": "subscribe", "subscriptions": [
-        {"id": 1, "channelId": channel(&channels, "/leg/knee")["id"].clone()},
-    ]}));
+    fox.subscribe(&[(1, channel(&channels, "/leg/knee"))]);
     sample(&mut fox, 1, "a knee sample", |b| b["unit"] == "rad");
 
     // With --clamp, a value outside the limits is sent as the nearest limit, and said so.
@@ -504,9 +560,7 @@ fn a_manifest_view_is_launched_and_restarted_by_the_launcher() {
         std::thread::sleep(Duration::from_millis(100));
     };
     let channels = fox.advertised(&["/arm/j3"]);
-    fox.send(json!({"op": "subscribe", "subscriptions": [
-        {"id": 1, "channelId": channel(&channels, "/arm/j3")["id"].clone()},
-    ]}));
+    fox.subscribe(&[(1, channel(&channels, "/arm/j3"))]);
     sample(&mut fox, 1, "a j3 sample after the restart", |b| {
         b["unit"] == "rad"
     });
@@ -518,5 +572,113 @@ fn a_manifest_view_is_launched_and_restarted_by_the_launcher() {
     assert!(err.contains("and the view stopped"), "{err}");
     assert!(err.contains("restarting the view (restart 1"), "{err}");
     assert!(pids_with(&view_args).is_empty());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// An MIT-mode motor on the simulated CAN bus with a 100 ms command watchdog (as in
+/// tests/refusals.rs): once a first frame armed it, with no controller sending frames, the
+/// watchdog trips the motor and the executor refuses its setpoints (`REJECTED`).
+const TRIPPING_LEG: &str = r#"
+system = "view-refusals"
+
+[subsystems.leg]
+rate_hz = 200
+watchdog_ms = 100
+
+[subsystems.leg.hardware.can]
+kind = "can_sim"
+mit = "1"
+
+[subsystems.leg.protocols.mit]
+kind = "can_motors"
+hardware = "can"
+
+[subsystems.leg.devices.knee]
+kind = "mit_motor"
+protocol = "mit"
+id = 1
+kp = 20.0
+kd = 1.0
+safe_action = "torque_off"
+
+[subsystems.leg.states.knee]
+device = "knee"
+channel = "position"
+units = "rad"
+writable = true
+min = -1.0
+max = 1.0
+
+[subsystems.leg.states.knee_enable]
+device = "knee"
+channel = "enable"
+writable = true
+min = 0
+max = 1
+"#;
+
+#[test]
+fn a_setpoint_the_executor_refuses_comes_back_as_an_error_with_the_flags() {
+    let d = Domain::unique("view-refused").unwrap();
+    let dir = tempdir("view-refused");
+    let manifest = dir.join("leg.toml");
+    std::fs::write(&manifest, TRIPPING_LEG).unwrap();
+    let _robot = Bg::spawn(
+        conductor(&d)
+            .arg("launch")
+            .arg(&manifest)
+            .args(["--no-rt", "--quiet"]),
+    );
+    let (_view, url) = view(&d, &["--listen", "127.0.0.1:0"]);
+    let mut fox = Fox::connect(&url);
+    let channels = fox.advertised(&["/leg/knee", "/leg/knee_enable"]);
+    fox.subscribe(&[(1, channel(&channels, "/leg/knee"))]);
+    // Brought up and enabled; a first setpoint is taken and arms the watchdog.
+    sample(&mut fox, 1, "the knee driving", |b| {
+        b["flags"]["disabled"] == false && b["flags"]["tripped"] == false
+    });
+    fox.send(json!({"op": "setParameters", "id": "t1",
+        "parameters": [{"name": "leg/knee", "value": 0.1, "type": "float64"}]}));
+    let r = fox.response("t1");
+    assert_eq!(param(&r, "leg/knee").unwrap()["value"], 0.1, "{r}");
+    assert!(fox.statuses.is_empty(), "{:?}", fox.statuses);
+    // Then nobody sends frames: the watchdog trips the motor.
+    let (_, tripped) = sample(&mut fox, 1, "the knee tripped", |b| {
+        b["flags"]["tripped"] == true
+    });
+    assert_eq!(tripped["flags"]["watchdog"], true, "{tripped}");
+    let held = tripped["value"].as_f64().unwrap();
+    assert!(held.abs() < 0.45, "{tripped}");
+
+    // In the limits, so the view sends it; the executor refuses it, and says so in the flags.
+    let t_send = monotonic_ns();
+    fox.send(json!({"op": "setParameters", "id": "r1",
+        "parameters": [{"name": "leg/knee", "value": 0.75, "type": "float64"}]}));
+    let r = fox.response("r1");
+    let answered = param(&r, "leg/knee").unwrap()["value"].as_f64().unwrap();
+    assert!(
+        (answered - 0.75).abs() > 0.3,
+        "answered with what it holds: {r}"
+    );
+    let st = fox.status("the executor refused leg/knee <- 0.75: device knee is tripped");
+    assert_eq!(st["level"], 2, "{st}");
+    assert!(
+        st["message"]
+            .as_str()
+            .unwrap()
+            .contains("conductor set leg/knee_enable 1"),
+        "{st}"
+    );
+    let (_, s) = sample(&mut fox, 1, "a sample after the refused frame", |b| {
+        ns(&b["t_publish"]) > t_send && b["flags"]["rejected"] == true
+    });
+    assert_eq!(s["flags"]["tripped"], true, "{s}");
+    // The same through the client-publish channel.
+    fox.send(json!({"op": "advertise", "channels": [
+        {"id": 3, "topic": "/leg/knee", "encoding": "json", "schemaName": "conductor.LiveSample"},
+    ]}));
+    fox.statuses.clear();
+    fox.publish(3, json!({"value": -0.5}));
+    fox.status("the executor refused leg/knee <- -0.5: device knee is tripped");
     let _ = std::fs::remove_dir_all(dir);
 }

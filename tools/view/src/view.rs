@@ -608,6 +608,7 @@ impl View {
     }
 
     /// Reports a verdict: the executor's (from `s`, the verdict sample) or none (`timed_out`).
+    /// A parameter set is answered with the value sent, or with the state's value when refused.
     fn resolve(&mut self, i: usize, p: Pending, s: Option<&StateSample>, timed_out: bool) {
         let name = self.states[i].name.clone();
         let note = if timed_out {
@@ -647,7 +648,10 @@ impl View {
         } else {
             None
         };
-        let value = s.map(|s| s.value).filter(|v| v.is_finite());
+        // Taken (or not known to be refused): answer with what was sent; a measured state (a
+        // position) reaches it only over the next ticks, and the panel should show the command,
+        // not the lag. Refused: answer with what the state holds, so the client's field reverts.
+        let refused = matches!(note, Some((true, _)));
         match p.origin {
             Origin::Publish(client) => {
                 if let Some((error, text)) = note {
@@ -660,9 +664,10 @@ impl View {
                 }
             }
             Origin::Parameter { request, slot } => {
-                let answer = match value {
-                    Some(v) => Parameter::float64(&name, v),
-                    None => self.parameter_of(&name),
+                let answer = if refused {
+                    self.parameter_of(&name)
+                } else {
+                    Parameter::float64(&name, p.sent)
                 };
                 if let Some(r) = self.sets.get_mut(&request) {
                     if let (Some((error, text)), Some(resp)) = (&note, &r.responder) {
