@@ -782,9 +782,10 @@ impl Supervisor {
         } else {
             ""
         };
-        match gateways {
-            0 => note!("conductor: {executors} executor(s){view} stopped"),
-            g => note!("conductor: {executors} executor(s), {g} gateway(s){view} stopped"),
+        match (gateways, view.is_empty()) {
+            (0, _) => note!("conductor: {executors} executor(s){view} stopped"),
+            (g, true) => note!("conductor: {executors} executor(s) and {g} gateway(s) stopped"),
+            (g, false) => note!("conductor: {executors} executor(s), {g} gateway(s){view} stopped"),
         }
         if !failures.is_empty() {
             return Err(LaunchError::Unclean { failures });
