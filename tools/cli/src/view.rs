@@ -22,7 +22,7 @@ pub fn run(bus: &Bus, a: &ViewArgs) -> Result<ViewReport> {
     println!("ready view {url}");
     let _ = std::io::stdout().flush();
     eprintln!(
-        "conductor view: {url} ({} states of {} executors in domain {:?} so far); open it in \
+        "conductor view: {url} ({} states of {} executor(s) in domain {:?} so far); open it in \
          Foxglove or Lichtblick (Open connection > Foxglove WebSocket){}",
         r.states,
         r.executors,
