@@ -14,6 +14,7 @@ mod history;
 pub mod metadata;
 pub mod naming;
 mod owner;
+pub mod setpoint;
 pub mod shutdown;
 mod spectrum;
 mod state;

@@ -7,6 +7,7 @@
 //! executor, but the launch does not wait for it: its board may be unplugged, and it reports
 //! ready (its `ready …` line) whenever the board answers. A gateway that cannot run or keeps
 //! crashing is given up (reported at once and in the final result) while the robot runs on.
+//! The live view of a manifest's `[view]` (`conductor view`) is supervised the same way.
 //!
 //! ```no_run
 //! use conductor_executor::launcher::{launch, LaunchOptions};
@@ -25,7 +26,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crate::cleanup::{executor_node_name, gateway_node_name, scan_and_clean};
-use crate::manifest::{GatewayDef, Manifest, ManifestError};
+use crate::manifest::{GatewayDef, Manifest, ManifestError, ViewDef};
 use crate::process::resolve_domain;
 use crate::signals::{self, Stop};
 use supervisor::Supervisor;
@@ -42,6 +43,11 @@ pub struct LaunchOptions {
     pub gateway: PathBuf,
     /// Arguments put before the gateway's own (e.g. a sub-command).
     pub gateway_args: Vec<OsString>,
+    /// The program of the manifest's `[view]` (`conductor`).
+    pub view: PathBuf,
+    /// Arguments put before the view's own `--domain`, `--listen`, `--clamp` (the `view`
+    /// sub-command).
+    pub view_args: Vec<OsString>,
     /// Bus domain (default: the manifest's, else `CONDUCTOR_DOMAIN`, else "default").
     pub domain: Option<String>,
     /// Only these subsystems (empty: all).
@@ -76,6 +82,8 @@ impl Default for LaunchOptions {
             executor_args: Vec::new(),
             gateway: default_gateway(),
             gateway_args: Vec::new(),
+            view: beside_me("conductor"),
+            view_args: vec!["view".into()],
             domain: None,
             only: Vec::new(),
             no_rt: false,
@@ -154,6 +162,14 @@ pub enum LaunchError {
         /// The OS error.
         source: std::io::Error,
     },
+    /// The view program could not be started.
+    #[error("cannot start the view program {program:?}: {source} (build it with `cargo build -p conductor-cli`, or point LaunchOptions::view at it)")]
+    SpawnView {
+        /// The program.
+        program: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
     /// A gateway program could not be started.
     #[error("cannot start the gateway program {program:?} for gateway {gateway:?}: {source} (build it with `cargo build -p score-gateway`, or point LaunchOptions::gateway at it)")]
     SpawnGateway {
@@ -226,6 +242,8 @@ pub enum ProcessKind {
     Executor,
     /// A gateway (`[gateways.<name>]`); the launch does not wait for it.
     Gateway,
+    /// The live view (`[view]`); the launch does not wait for it.
+    View,
 }
 
 /// How each executor and gateway ended, after an orderly stop.
@@ -364,11 +382,15 @@ impl Launch {
             );
         }
 
+        // The view watches the whole domain: it runs whatever `only` says.
+        let view: Option<ViewDef> = manifest.view.clone();
+        let view_name = String::from("view");
         let info = Arc::new(Mutex::new(
             subsystems
                 .iter()
                 .map(|s| (s, ProcessKind::Executor))
                 .chain(gateways.iter().map(|g| (&g.name, ProcessKind::Gateway)))
+                .chain(view.iter().map(|_| (&view_name, ProcessKind::View)))
                 .map(|(s, kind)| ExecutorInfo {
                     subsystem: s.clone(),
                     kind,
@@ -386,7 +408,7 @@ impl Launch {
         let sup = Supervisor::new(opts, path, domain.clone(), stop.clone(), info.clone());
         let thread = std::thread::Builder::new()
             .name("supervisor".into())
-            .spawn(move || sup.run(subsystems, gateways, ready_tx))
+            .spawn(move || sup.run(subsystems, gateways, view, ready_tx))
             .map_err(|e| LaunchError::Bus(e.to_string()))?;
         match ready_rx.recv() {
             Ok(()) => Ok(Launch {
@@ -404,7 +426,7 @@ impl Launch {
         }
     }
 
-    /// Current executors, then gateways.
+    /// Current executors, then gateways, then the view.
     pub fn executors(&self) -> Vec<ExecutorInfo> {
         self.info.lock().map(|v| v.clone()).unwrap_or_default()
     }

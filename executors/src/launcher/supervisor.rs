@@ -19,7 +19,7 @@ use nix::unistd::Pid;
 
 use super::{ExecutorInfo, LaunchError, LaunchOptions, LaunchReport, ProcessKind, SubsystemReport};
 use crate::cleanup::scan_and_clean;
-use crate::manifest::{GatewayDef, GatewayKind};
+use crate::manifest::{GatewayDef, GatewayKind, ViewDef};
 use crate::process::{EXIT_CONFIG, EXIT_NO_RT, READY};
 use crate::signals::Stop;
 
@@ -45,6 +45,7 @@ enum Phase {
 enum Role {
     Executor,
     Gateway(GatewayDef),
+    View(ViewDef),
 }
 
 impl Role {
@@ -52,8 +53,38 @@ impl Role {
         match self {
             Role::Executor => ProcessKind::Executor,
             Role::Gateway(_) => ProcessKind::Gateway,
+            Role::View(_) => ProcessKind::View,
         }
     }
+
+    /// Gateways and the view: not waited for at start, given up (the robot runs on) when they
+    /// cannot run or keep crashing.
+    fn auxiliary(&self) -> bool {
+        !matches!(self, Role::Executor)
+    }
+
+    /// How events name the process called `name`.
+    fn label(&self, name: &str) -> String {
+        match self {
+            Role::Executor => format!("subsystem {name}"),
+            Role::Gateway(_) => format!("gateway {name}"),
+            Role::View(_) => "the view".into(),
+        }
+    }
+}
+
+/// The arguments of the view process (after [`LaunchOptions::view_args`]).
+pub(super) fn view_args(v: &ViewDef, domain: &str) -> Vec<OsString> {
+    let mut a: Vec<OsString> = vec![
+        "--domain".into(),
+        domain.into(),
+        "--listen".into(),
+        v.listen.to_string().into(),
+    ];
+    if v.clamp {
+        a.push("--clamp".into());
+    }
+    a
 }
 
 struct ChildRt {
@@ -183,13 +214,18 @@ impl Supervisor {
         mut self,
         subsystems: Vec<String>,
         gateways: Vec<GatewayDef>,
+        view: Option<ViewDef>,
         ready: Sender<()>,
     ) -> Result<LaunchReport, LaunchError> {
-        let roles = subsystems.into_iter().map(|s| (s, Role::Executor)).chain(
-            gateways
-                .into_iter()
-                .map(|g| (g.name.clone(), Role::Gateway(g))),
-        );
+        let roles = subsystems
+            .into_iter()
+            .map(|s| (s, Role::Executor))
+            .chain(
+                gateways
+                    .into_iter()
+                    .map(|g| (g.name.clone(), Role::Gateway(g))),
+            )
+            .chain(view.map(|v| ("view".to_string(), Role::View(v))));
         for (s, role) in roles {
             self.children.push(ChildRt {
                 subsystem: s,
@@ -249,6 +285,12 @@ impl Supervisor {
                     .args(gateway_args(g, self.domain.name()));
                 cmd
             }
+            Role::View(v) => {
+                let mut cmd = Command::new(&self.opts.view);
+                cmd.args(&self.opts.view_args)
+                    .args(view_args(v, self.domain.name()));
+                cmd
+            }
         };
         cmd.stdin(Stdio::null())
             .stdout(Stdio::piped())
@@ -256,7 +298,7 @@ impl Supervisor {
             // Its own process group: a terminal's Ctrl-C reaches only the launcher, which
             // forwards it once.
             .process_group(0);
-        let gateway = matches!(c.role, Role::Gateway(_));
+        let gateway = c.role.auxiliary();
         // SAFETY: the closure runs in the forked child before exec and only makes the
         // async-signal-safe sigprocmask(2) and prctl(2) system calls.
         unsafe {
@@ -288,13 +330,18 @@ impl Supervisor {
                 program: self.opts.gateway.clone(),
                 source,
             },
+            Role::View(_) => LaunchError::SpawnView {
+                program: self.opts.view.clone(),
+                source,
+            },
         })?;
         let stdout = child.stdout.take().expect("piped");
         let stderr = child.stderr.take().expect("piped");
         let (tx, generation) = (self.events.0.clone(), c.generation);
         let ready_line = match c.role {
             Role::Executor => executor_ready,
-            Role::Gateway(_) => gateway_ready,
+            // `ready view ws://…`, like a gateway's `ready <name> …`.
+            Role::Gateway(_) | Role::View(_) => gateway_ready,
         };
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
@@ -353,8 +400,8 @@ impl Supervisor {
         c.phase = Phase::Stopped;
         c.drain_output();
         note!(
-            "conductor: giving up on gateway {}: {reason}; the rest of the robot runs on{}",
-            self.children[i].subsystem,
+            "conductor: giving up on {}: {reason}; the rest of the robot runs on{}",
+            self.children[i].role.label(&self.children[i].subsystem),
             super::tail_text(&self.tail(i))
         );
         self.children[i].failed = Some(reason);
@@ -392,6 +439,9 @@ impl Supervisor {
                                 c.subsystem,
                                 g.port.display()
                             ),
+                            Role::View(_) => {
+                                note!("conductor: view ready (pid {pid}): open {what} in Foxglove")
+                            }
                         }
                         c.ready_text = what;
                         let pid = c.proc.as_ref().map(Child::id);
@@ -441,9 +491,11 @@ impl Supervisor {
                     });
                 }
             }
-            if self.children.iter().all(|c| {
-                matches!(c.role, Role::Gateway(_)) || matches!(c.phase, Phase::Running { .. })
-            }) {
+            if self
+                .children
+                .iter()
+                .all(|c| c.role.auxiliary() || matches!(c.phase, Phase::Running { .. }))
+            {
                 return Ok(());
             }
             if self.stop.requested() {
@@ -466,8 +518,8 @@ impl Supervisor {
                 Role::Executor => bus
                     .as_ref()
                     .and_then(|b| StatsSubscriber::new(b, &c.subsystem).ok()),
-                // A gateway publishes no executor stats.
-                Role::Gateway(_) => None,
+                // A gateway or the view publishes no executor stats.
+                Role::Gateway(_) | Role::View(_) => None,
             })
             .collect();
         let tty = std::io::stderr().is_terminal();
@@ -512,19 +564,15 @@ impl Supervisor {
                     let _ = scan_and_clean(&self.domain);
                     let c = &mut self.children[i];
                     c.restarts += 1;
-                    let what = match c.role {
-                        Role::Executor => "subsystem",
-                        Role::Gateway(_) => "gateway",
-                    };
                     note!(
-                        "conductor: restarting {what} {} (restart {}, after {})",
-                        c.subsystem,
+                        "conductor: restarting {} (restart {}, after {})",
+                        c.role.label(&c.subsystem),
                         c.restarts,
                         describe(&last)
                     );
                     match self.spawn(i) {
                         Ok(()) => {}
-                        Err(e) if matches!(self.children[i].role, Role::Gateway(_)) => {
+                        Err(e) if self.children[i].role.auxiliary() => {
                             self.give_up(i, e.to_string())
                         }
                         Err(e) => return Err(e),
@@ -543,7 +591,9 @@ impl Supervisor {
                         }
                     }
                     // A gateway waiting this long for its board is not crashing.
-                    Role::Gateway(_) if waited > STABLE => self.children[i].consecutive = 0,
+                    Role::Gateway(_) | Role::View(_) if waited > STABLE => {
+                        self.children[i].consecutive = 0
+                    }
                     _ => {}
                 }
             }
@@ -558,7 +608,7 @@ impl Supervisor {
         };
         c.proc = None;
         let code = status.code().map(|c| c as u8);
-        let gateway = matches!(c.role, Role::Gateway(_));
+        let gateway = c.role.auxiliary();
         if gateway && code == Some(EXIT_CONFIG) {
             self.give_up(i, format!("it cannot run ({})", describe(&status)));
             return Ok(());
@@ -612,9 +662,8 @@ impl Supervisor {
             .saturating_mul(1 << (c.consecutive - 1).min(16))
             .min(self.opts.backoff_max);
         note!(
-            "conductor: {} {} stopped unexpectedly ({}); restarting in {:?}",
-            if gateway { "gateway" } else { "subsystem" },
-            c.subsystem,
+            "conductor: {} stopped unexpectedly ({}); restarting in {:?}",
+            c.role.label(&c.subsystem),
             describe(&status),
             delay
         );
@@ -629,9 +678,16 @@ impl Supervisor {
     fn summary(&self, bus: &Bus, stats: &mut [Option<StatsSubscriber>]) -> Vec<String> {
         let mut lines = Vec::new();
         for (i, c) in self.children.iter().enumerate() {
-            if let Role::Gateway(g) = &c.role {
-                lines.push(gateway_summary(c, g));
-                continue;
+            match &c.role {
+                Role::Gateway(g) => {
+                    lines.push(gateway_summary(c, g));
+                    continue;
+                }
+                Role::View(v) => {
+                    lines.push(view_summary(c, v));
+                    continue;
+                }
+                Role::Executor => {}
             }
             if stats[i].is_none() {
                 stats[i] = StatsSubscriber::new(bus, &c.subsystem).ok();
@@ -700,7 +756,7 @@ impl Supervisor {
         }
         for c in &self.children {
             if let Some(why) = &c.failed {
-                failures.push(format!("gateway {}: given up: {why}", c.subsystem));
+                failures.push(format!("{}: given up: {why}", c.role.label(&c.subsystem)));
             }
         }
         let _ = scan_and_clean(&self.domain);
@@ -712,12 +768,24 @@ impl Supervisor {
             .iter()
             .filter(|c| matches!(c.role, Role::Gateway(_)))
             .count();
-        match gateways {
-            0 => note!("conductor: {} executor(s) stopped", self.children.len()),
-            g => note!(
-                "conductor: {} executor(s) and {g} gateway(s) stopped",
-                self.children.len() - g
-            ),
+        let executors = self
+            .children
+            .iter()
+            .filter(|c| matches!(c.role, Role::Executor))
+            .count();
+        let view = if self
+            .children
+            .iter()
+            .any(|c| matches!(c.role, Role::View(_)))
+        {
+            " and the view"
+        } else {
+            ""
+        };
+        match (gateways, view.is_empty()) {
+            (0, _) => note!("conductor: {executors} executor(s){view} stopped"),
+            (g, true) => note!("conductor: {executors} executor(s) and {g} gateway(s) stopped"),
+            (g, false) => note!("conductor: {executors} executor(s), {g} gateway(s){view} stopped"),
         }
         if !failures.is_empty() {
             return Err(LaunchError::Unclean { failures });
@@ -758,6 +826,26 @@ fn gateway_summary(c: &ChildRt, g: &GatewayDef) -> String {
         g.kind.name(),
         g.port.display(),
         c.restarts
+    )
+}
+
+/// The view's summary line: where it listens, restarts, and what it is doing.
+fn view_summary(c: &ChildRt, v: &ViewDef) -> String {
+    let state = match (&c.phase, &c.failed) {
+        (_, Some(why)) => format!(" (given up: {why})"),
+        (Phase::Running { .. }, _) => String::new(),
+        (Phase::Starting { .. }, _) => " (starting)".into(),
+        (Phase::Waiting { .. }, _) => " (restarting)".into(),
+        (Phase::Stopped, _) => " (stopped)".into(),
+    };
+    let url = if c.ready_text.is_empty() {
+        format!("ws://{}", v.listen)
+    } else {
+        c.ready_text.clone()
+    };
+    format!(
+        "conductor: {:<16} Foxglove view on {url}  restarts {}{state}",
+        c.subsystem, c.restarts
     )
 }
 
@@ -816,6 +904,27 @@ mod tests {
                 "--watchdog-ms",
                 "250"
             ]
+        );
+    }
+
+    #[test]
+    fn view_arguments() {
+        let v = ViewDef::default();
+        assert_eq!(
+            strings(view_args(&v, "d1")),
+            ["--domain", "d1", "--listen", "127.0.0.1:8765"]
+        );
+        let v = ViewDef {
+            listen: "0.0.0.0:9000".parse().unwrap(),
+            clamp: true,
+        };
+        assert_eq!(
+            strings(view_args(&v, "d1"))[3..],
+            ["0.0.0.0:9000", "--clamp"]
+        );
+        assert_eq!(
+            gateway_ready("ready view ws://127.0.0.1:8765").as_deref(),
+            Some("ws://127.0.0.1:8765")
         );
     }
 

@@ -1,6 +1,6 @@
 //! The manifest: a TOML description of a robot (system → subsystems → hardware, protocols,
-//! devices, states; and gateways, boards put on the bus by their own process), validated in full
-//! before anything runs.
+//! devices, states; gateways, boards put on the bus by their own process; and the live view in
+//! Foxglove), validated in full before anything runs.
 //!
 //! [`Manifest::load`] either returns a consistent model, in which every link is resolved to an
 //! index, every rate to a divisor of its subsystem's base rate and every kind's parameters to
@@ -77,8 +77,10 @@ pub const GATEWAY_KEYS: &[&str] = &[
     "retry_ms",
     "watchdog_ms",
 ];
+/// Keys of the `[view]` table.
+pub const VIEW_KEYS: &[&str] = &["listen", "clamp"];
 /// Top-level keys.
-pub const TOP_KEYS: &[&str] = &["system", "domain", "subsystems", "gateways"];
+pub const TOP_KEYS: &[&str] = &["system", "domain", "subsystems", "gateways", "view"];
 
 /// Highest base rate a subsystem may ask for (Hz).
 pub const MAX_RATE_HZ: f64 = 100_000.0;
@@ -141,6 +143,8 @@ pub struct Manifest {
     pub subsystems: Vec<Subsystem>,
     /// Gateways in document order; each runs as one gateway process.
     pub gateways: Vec<GatewayDef>,
+    /// The live view (`[view]`), run as one more supervised process when present.
+    pub view: Option<ViewDef>,
     /// What validation found doubtful but not wrong (a bus loaded above 80 %, an actuator
     /// nothing can command, ...), in document order; see [`Manifest::render_warnings`].
     pub warnings: Vec<Diagnostic>,
@@ -192,6 +196,25 @@ pub struct GatewayDef {
     /// Command watchdog (ms): no setpoint for this long → the commanded variables go to their
     /// safe value; `None`: off.
     pub watchdog_ms: Option<u64>,
+}
+
+/// The live view in Foxglove (`[view]`): `conductor view` on the manifest's domain, which the
+/// launcher starts and supervises like a gateway (it does not wait for it).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ViewDef {
+    /// Address and port of its WebSocket server (default `127.0.0.1:8765`: loopback only).
+    pub listen: std::net::SocketAddr,
+    /// Send the nearest limit for a setpoint outside a state's limits instead of refusing it.
+    pub clamp: bool,
+}
+
+impl Default for ViewDef {
+    fn default() -> Self {
+        Self {
+            listen: std::net::SocketAddr::from(([127, 0, 0, 1], 8765)),
+            clamp: false,
+        }
+    }
 }
 
 /// One executor: a base tick and the components it schedules.

@@ -132,6 +132,22 @@ Replies: `SET v` -> `OK <sent>` or `OK <sent> CLAMPED`; `GET` -> `<value>`;
 Examples:\n  conductor udp-gateway\n  conductor udp-gateway 'leg/*' --base-port 4000 --bind 0.0.0.0"
     )]
     UdpGateway(UdpArgs),
+    /// Live view in Foxglove or Lichtblick: a Foxglove WebSocket server with every state, the
+    /// executors' stats, and settable states as parameters.
+    #[command(
+        after_help = "Open ws://127.0.0.1:8765 in Foxglove (Open connection > Foxglove WebSocket)
+or Lichtblick. Each state is a channel /<subsystem>/<state> (JSON: value, unit, status, flags,
+t_sample, t_publish, seq, tick; log time = sample time, CLOCK_MONOTONIC), each executor's health
+/<subsystem>/stats. New states appear as they are discovered. Settable states are parameters
+named <subsystem>/<state>, and take {\"value\": x} published on their own topic; both go
+through the checks of `conductor set` (NaN/inf and read-only refused; outside the limits refused,
+or clamped with --clamp) and report the executor's verdict (refused, clamped) as a status.
+It only subscribes: it never blocks or slows an executor. Loopback only unless --listen says
+otherwise; anything else lets the network command the robot.
+
+Examples:\n  conductor view\n  conductor view --listen 0.0.0.0:8765\n  conductor view --listen 127.0.0.1:0 --clamp"
+    )]
+    View(ViewArgs),
     /// Plot recorded states against time into a PNG (or SVG) image.
     #[command(
         after_help = "Examples:\n  conductor plot run.mcap 'leg/*' -o leg.png --title 'Robot Joint State'\n  conductor plot run.mcap 'leg/*' -o leg.png --flags"
@@ -318,6 +334,19 @@ pub struct UdpArgs {
     /// Wait this long for a matching state to appear (seconds).
     #[arg(long, default_value_t = 5.0, value_name = "S")]
     pub wait: f64,
+}
+
+/// `conductor view`.
+#[derive(Debug, Args)]
+pub struct ViewArgs {
+    /// Address and port of the WebSocket server; anything other than loopback exposes the robot
+    /// (and its settable states) to the network. Port 0 picks a free one (printed).
+    #[arg(long, default_value = "127.0.0.1:8765", value_name = "ADDR")]
+    pub listen: std::net::SocketAddr,
+    /// Send the nearest limit for a value outside a state's limits (as `conductor set --clamp`)
+    /// instead of refusing it.
+    #[arg(long)]
+    pub clamp: bool,
 }
 
 /// `conductor plot`.

@@ -11,6 +11,9 @@ pub enum CliError {
     /// The bus refused (unknown state, bad name, iceoryx2 failure, ...).
     #[error(transparent)]
     Bus(#[from] BusError),
+    /// The live view cannot run (its address, the bus).
+    #[error(transparent)]
+    View(#[from] conductor_view::ViewError),
     /// No state of the domain matches a pattern.
     #[error(
         "no state matches {pattern:?} in domain {domain:?}{}",

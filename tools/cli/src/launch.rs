@@ -1,6 +1,7 @@
 //! `conductor launch`: the launcher from `conductor-executor`, with this same binary as the
-//! executor program (a hidden `__executor` sub-command) and as the Score gateway (a hidden
-//! `__score-gateway` sub-command), so `conductor` alone runs a robot and its Score boards.
+//! executor program (a hidden `__executor` sub-command), as the Score gateway (a hidden
+//! `__score-gateway` sub-command) and as the view (`view`), so `conductor` alone runs a robot,
+//! its Score boards and its live view.
 
 use std::ffi::OsString;
 use std::process::ExitCode;
@@ -20,10 +21,11 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
         return match load_manifest(&a.manifest) {
             Ok(m) => {
                 println!(
-                    "{}: valid ({} subsystems, {} gateways)",
+                    "{}: valid ({} subsystems, {} gateways{})",
                     a.manifest.display(),
                     m.subsystems.len(),
-                    m.gateways.len()
+                    m.gateways.len(),
+                    if m.view.is_some() { ", a view" } else { "" }
                 );
                 ExitCode::SUCCESS
             }
@@ -43,8 +45,11 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
     let opts = LaunchOptions {
         executor: exe.clone(),
         executor_args: vec!["__executor".into()],
-        gateway: exe,
+        gateway: exe.clone(),
         gateway_args: vec!["__score-gateway".into()],
+        // A manifest's `[view]`: `conductor view` of this same binary.
+        view: exe,
+        view_args: vec!["view".into()],
         domain: domain.map(str::to_string),
         only: a.only.clone(),
         no_rt: a.no_rt,

@@ -7,6 +7,7 @@
 //!   `--plot`), [`top`];
 //! * logging: [`record`] and [`replay`] over the MCAP layout in [`recording`], and [`plot`];
 //! * the thesis' external interface: [`udp`] (`udp-gateway`);
+//! * the live view in Foxglove: [`view`] (over `conductor-view`);
 //! * the benchmark suite: [`bench`] (`bench`, over `conductor_benches::suite`).
 //!
 //! Long-running commands stop cleanly on Ctrl-C/SIGTERM ([`stop`]).
@@ -30,6 +31,7 @@ pub mod replay;
 pub mod select;
 pub mod top;
 pub mod udp;
+pub mod view;
 
 use clap::CommandFactory;
 use conductor_bus::{Bus, Domain};
@@ -93,6 +95,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::UdpGateway(a) => {
             install_stop()?;
             udp::run(&bus("udp-gateway")?, a).map(drop)
+        }
+        Command::View(a) => {
+            install_stop()?;
+            view::run(&bus("view")?, a).map(drop)
         }
         Command::Plot(a) => plot::run(a).map(drop),
         Command::Completions { shell } => {

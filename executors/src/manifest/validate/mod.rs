@@ -7,6 +7,7 @@
 //! * this module: the document, subsystems, and checks across subsystems and gateways;
 //! * [`components`]: hardware, protocol, device and state tables;
 //! * [`gateways`]: gateway tables;
+//! * [`view`]: the `[view]` table;
 //! * [`fields`]: the checks shared by them (names, rates, kinds and their parameters, links,
 //!   calibration);
 //! * [`load`]: the load of every bus (an error above 100 % of the wire, a warning above 80 %);
@@ -17,6 +18,7 @@ mod components;
 mod fields;
 mod gateways;
 mod load;
+mod view;
 
 use std::ops::Range;
 use std::path::Path;
@@ -124,6 +126,9 @@ pub(super) fn validate(
         ),
         None => {}
     }
+    let view = top
+        .table(&mut cx.d, "view")
+        .map(|mut t| view::view(&mut cx, &mut t));
     top.finish(&mut cx.d, TOP_KEYS);
     check_gateway_names(&mut cx, &subsystem_names, &gateway_names);
     check_resources(&mut cx);
@@ -139,6 +144,7 @@ pub(super) fn validate(
         domain: domain.map(|d| d.value),
         subsystems: subsystems.into_iter().flatten().collect(),
         gateways: gateways.into_iter().flatten().collect(),
+        view: view.flatten(),
         warnings: cx.d.finish(&file, source),
     })
 }
