@@ -66,6 +66,7 @@ impl core::fmt::Debug for Bus {
 impl Bus {
     /// Joins `domain` as a node called `node_name` (shown by `iox2 node list`).
     pub fn open(domain: &Domain, node_name: &str) -> Result<Self> {
+        domain.prepare_dirs()?;
         let name = node_name
             .try_into()
             .map_err(|e| BusError::iox(format!("node name {node_name:?}"), e))?;

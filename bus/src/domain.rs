@@ -15,6 +15,10 @@ use crate::error::{BusError, Result};
 /// Environment variable naming the domain (default [`Domain::DEFAULT`]).
 pub const ENV: &str = "CONDUCTOR_DOMAIN";
 
+/// The directory that holds every domain's root directory. Shared by all users, like `/tmp`
+/// (mode 1777): each user's processes create and own their domains' directories in it.
+pub const ROOT_BASE: &str = "/tmp/conductor";
+
 /// Longest domain name (the shm prefix must stay well under the file-name limit).
 pub const MAX_DOMAIN_LEN: usize = 48;
 
@@ -99,6 +103,93 @@ impl Domain {
     pub fn root_path(&self) -> String {
         root_path(&self.name)
     }
+
+    /// Makes the domain's directories safe to use before joining it ([`crate::Bus::open`] calls
+    /// this):
+    ///
+    /// * [`ROOT_BASE`] exists with mode 1777 (sticky, writable by all, like `/tmp`), so an
+    ///   executor running as a dedicated user can create its domain even after a process of
+    ///   another user (root running `conductor list`, say) created the base first. A base that
+    ///   iceoryx2 created with its own mode (0750) is opened up by its owner; one that is not a
+    ///   directory, or not writable and owned by someone else, is an error saying so.
+    /// * The domain's directory, if it exists, belongs to this user and is writable by no one
+    ///   else: iceoryx2 makes every segment of a domain readable and writable by its creator
+    ///   only, so processes of one domain must run as one user (root too: root can open the
+    ///   files, but the executor cannot open root's, so root's samples and commands never
+    ///   arrive). A directory another user made first (to squat the name or to read what is
+    ///   put in it) is refused instead of used.
+    pub fn prepare_dirs(&self) -> Result<()> {
+        use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
+        let err = |path: &str, reason: String| BusError::DomainAccess {
+            domain: self.name.clone(),
+            path: path.into(),
+            reason,
+        };
+        let euid = effective_uid();
+        let base = std::path::Path::new(ROOT_BASE);
+        if let Err(e) = std::fs::create_dir(base) {
+            if e.kind() != std::io::ErrorKind::AlreadyExists {
+                return Err(err(ROOT_BASE, format!("cannot create it: {e}")));
+            }
+        }
+        let m = std::fs::symlink_metadata(base).map_err(|e| err(ROOT_BASE, e.to_string()))?;
+        if !m.file_type().is_dir() {
+            return Err(err(
+                ROOT_BASE,
+                "is not a directory (a symbolic link or a file); remove it".into(),
+            ));
+        }
+        if m.mode() & 0o7777 != 0o1777 {
+            if m.uid() == euid {
+                std::fs::set_permissions(base, std::fs::Permissions::from_mode(0o1777))
+                    .map_err(|e| err(ROOT_BASE, format!("cannot make it mode 1777: {e}")))?;
+            } else if euid != 0 && m.mode() & 0o002 == 0 {
+                return Err(err(
+                    ROOT_BASE,
+                    format!(
+                        "mode {:04o}, owned by uid {}: users other than its owner cannot create \
+                         domains in it; make it shared like /tmp: sudo chmod 1777 {ROOT_BASE}",
+                        m.mode() & 0o7777,
+                        m.uid()
+                    ),
+                ));
+            }
+        }
+        let dir = root_path(&self.name);
+        let dir = dir.trim_end_matches('/');
+        match std::fs::symlink_metadata(dir) {
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+            Err(e) => Err(err(dir, e.to_string())),
+            Ok(m) if !m.file_type().is_dir() => Err(err(
+                dir,
+                "is not a directory (a symbolic link or a file); refusing to use it".into(),
+            )),
+            Ok(m) if m.uid() != euid => Err(err(
+                dir,
+                format!(
+                    "belongs to uid {0}, not to this process (uid {euid}): every process of a \
+                     domain, root included, must run as the same user (`sudo -u '#{0}' ...`, see \
+                     docs/permissions.md); if no process uses the domain any more, remove the \
+                     directory",
+                    m.uid()
+                ),
+            )),
+            Ok(m) if m.mode() & 0o022 != 0 => Err(err(
+                dir,
+                format!(
+                    "mode {:04o} lets other users change the domain's records; refusing to use it",
+                    m.mode() & 0o7777
+                ),
+            )),
+            Ok(_) => Ok(()),
+        }
+    }
+}
+
+/// This process's effective user id.
+fn effective_uid() -> u32 {
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    unsafe { libc::geteuid() }
 }
 
 fn prefix(name: &str) -> String {
@@ -106,7 +197,7 @@ fn prefix(name: &str) -> String {
 }
 
 fn root_path(name: &str) -> String {
-    format!("/tmp/conductor/{name}/")
+    format!("{ROOT_BASE}/{name}/")
 }
 
 #[cfg(test)]

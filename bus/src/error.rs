@@ -133,6 +133,16 @@ pub enum BusError {
         /// The limit.
         max: usize,
     },
+    /// The domain's directory cannot be used safely by this process (see `docs/permissions.md`).
+    #[error("domain {domain:?}: {path}: {reason}")]
+    DomainAccess {
+        /// The domain.
+        domain: String,
+        /// The directory concerned.
+        path: String,
+        /// What is wrong and how to fix it.
+        reason: String,
+    },
     /// A failure inside iceoryx2, with what we were doing.
     #[error("{context}: {detail}")]
     Iceoryx {

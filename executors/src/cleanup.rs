@@ -30,6 +30,7 @@ pub struct Scan {
 /// Lists the domain's nodes, removing the stale resources of every dead one.
 pub fn scan_and_clean(domain: &Domain) -> Result<Scan, String> {
     let mut scan = Scan::default();
+    domain.prepare_dirs().map_err(|e| e.to_string())?;
     Node::<RtIpc>::list(domain.iceoryx2_config(), |state| {
         match state {
             NodeState::Alive(view) => {

@@ -136,4 +136,35 @@ mod tests {
             "split across a small buffer, in order"
         );
     }
+
+    /// The socket is connected to `remote`: the kernel drops datagrams from any other address
+    /// or port, so only the configured bridge can put bytes on the bus (docs/permissions.md).
+    #[test]
+    fn datagrams_from_anyone_but_the_peer_are_dropped() {
+        let any: SocketAddr = "127.0.0.1:0".parse().unwrap();
+        let peer = UdpSocket::bind(any).unwrap();
+        let stranger = UdpSocket::bind(any).unwrap();
+        let mut hw = UdpHardware::open(any, peer.local_addr().unwrap()).unwrap();
+        let to = hw.local_addr().unwrap();
+        stranger.send_to(&[66, 66], to).unwrap();
+        peer.send_to(&[7], to).unwrap();
+        let ctx = TickCtx { tick: 0, now_ns: 0 };
+        let mut out = [0u8; 8];
+        let mut got = Vec::new();
+        for _ in 0..1000 {
+            let k = hw.receive(&mut out, ctx).unwrap();
+            got.extend_from_slice(&out[..k]);
+            if !got.is_empty() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        // The stranger's first datagram was sent before the peer's, so it would have come
+        // first; a later one does not arrive either.
+        stranger.send_to(&[66], to).unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(50));
+        let k = hw.receive(&mut out, ctx).unwrap();
+        got.extend_from_slice(&out[..k]);
+        assert_eq!(got, [7]);
+    }
 }

@@ -24,6 +24,10 @@ pub const MAX_PATH_LEN: usize = 63;
 pub const MAX_RATE_HZ: u32 = 100_000;
 /// Lowest update rate of a periodic symbol, in millihertz.
 pub const MIN_RATE_MILLIHZ: u32 = 1;
+/// Longest `run` (and `score --run`), in seconds: 10⁹ s, about 31.7 years. Every clock of the
+/// engine counts microseconds in a `u64` (≈ 584 000 years), so a run within this bound never
+/// overflows a clock, while `run 1e30` is refused instead of wrapping it.
+pub const MAX_RUN_SECONDS: f64 = 1e9;
 
 // Slots are addressed by a `u8` (`VarId`), expression positions by a `u16`.
 const _: () =

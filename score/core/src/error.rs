@@ -1,14 +1,84 @@
 //! Typed errors of the command language. Each names the offending token and what was expected;
 //! a command that returns an error has changed nothing.
 
-use core::fmt;
+use core::fmt::{self, Write as _};
 
 use crate::capacity::MAX_NAME_LEN;
 use crate::hal::HalError;
 use crate::text::ShortStr;
 
-/// A token quoted in an error message (cut to 24 bytes, ending in `~` if cut).
-pub type Token = ShortStr<24>;
+/// A token quoted in an error message: its text (cut to 24 bytes, ending in `~` if cut;
+/// invisible characters such as a byte-order mark or a zero-width space written as `\u{feff}`),
+/// and where it was in the command line, so that [`Error::column`] can point at it.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Token {
+    text: ShortStr<24>,
+    /// Address of the token's first byte (compared with the line's bytes by `column`; the
+    /// token may come from elsewhere, then it matches no line).
+    at: usize,
+}
+
+impl Token {
+    /// The token `s` (usually a slice of the command line), escaped and cut as needed.
+    pub fn truncated(s: &str) -> Self {
+        let text = if s.chars().any(invisible) {
+            let mut buf = [0u8; 48];
+            let mut w = crate::text::BufWriter::new(&mut buf);
+            for c in s.chars() {
+                let r = if invisible(c) {
+                    write!(w, "\\u{{{:x}}}", c as u32)
+                } else {
+                    w.write_char(c)
+                };
+                if r.is_err() {
+                    break;
+                }
+            }
+            ShortStr::truncated(w.as_str())
+        } else {
+            ShortStr::truncated(s)
+        };
+        Token {
+            text,
+            at: s.as_ptr() as usize,
+        }
+    }
+
+    /// The text as quoted in messages.
+    pub fn as_str(&self) -> &str {
+        self.text.as_str()
+    }
+
+    /// Byte offset of this token in `line`, if it was taken from it.
+    pub fn offset_in(&self, line: &str) -> Option<usize> {
+        let start = line.as_ptr() as usize;
+        (self.at >= start && self.at < start + line.len()).then(|| self.at - start)
+    }
+}
+
+/// Characters that print as nothing or move the cursor: control characters and the Unicode
+/// format characters a text editor may leave in a file (soft hyphen, zero-width spaces and
+/// joiners, direction marks, word joiner, byte-order mark).
+fn invisible(c: char) -> bool {
+    c.is_control()
+        || matches!(c, '\u{ad}' | '\u{200b}'..='\u{200f}' | '\u{2028}'..='\u{202e}'
+            | '\u{2060}'..='\u{2064}' | '\u{feff}')
+}
+
+impl PartialEq for Token {
+    /// Two tokens are equal if their texts are (wherever they came from).
+    fn eq(&self, other: &Self) -> bool {
+        self.text == other.text
+    }
+}
+
+impl Eq for Token {}
+
+impl fmt::Display for Token {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
 /// A symbol name.
 pub type Name = ShortStr<MAX_NAME_LEN>;
 
@@ -205,6 +275,49 @@ pub enum Error {
         /// The HAL's reason.
         error: HalError,
     },
+}
+
+impl Error {
+    /// The token the message quotes, if it names one from the command line.
+    pub fn token(&self) -> Option<&Token> {
+        match self {
+            Error::UnknownCommand { token }
+            | Error::Extra { token, .. }
+            | Error::Invalid { token, .. }
+            | Error::Expression { token, .. }
+            | Error::UnknownVariable { token, .. }
+            | Error::Busy { token, .. }
+            | Error::Channel { token, .. }
+            | Error::Hardware { token, .. } => Some(token),
+            _ => None,
+        }
+    }
+
+    /// The 1-based column (in characters) of `line` that this error, returned by
+    /// [`crate::Engine::execute`] for that same `line`, is about: the token it quotes; for a
+    /// missing argument, just past the last token; otherwise the command word. `None` for a
+    /// blank line or a line this error did not come from.
+    pub fn column(&self, line: &str) -> Option<usize> {
+        let offset = match self.token().and_then(|t| t.offset_in(line)) {
+            Some(o) => o,
+            None => {
+                let tokens = crate::lexer::Tokens::split(line).ok()?;
+                let toks = tokens.as_slice();
+                let word = match self {
+                    Error::Missing { .. } => toks.last()?,
+                    _ => toks.first()?,
+                };
+                let o = word.as_ptr() as usize - line.as_ptr() as usize;
+                match self {
+                    Error::Missing { .. } => o + word.len() + 1,
+                    _ => o,
+                }
+            }
+        };
+        let offset = offset.min(line.len() + 1);
+        let before = line.get(..offset.min(line.len())).unwrap_or(line);
+        Some(before.chars().count() + 1 + offset.saturating_sub(line.len()))
+    }
 }
 
 /// Shorthand for the engine's results.

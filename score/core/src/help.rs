@@ -67,7 +67,8 @@ pub const COMMANDS: &[CommandSpec] = &[
     c("clear", Main, "Delete every variable", "clear", "Releases all hardware and files the variables used."),
     c("run", Main, "Advance time (host port)", "run seconds",
       "Simulated time: runs every update due in the next `seconds` as fast as possible.\n\
-       Real time: waits `seconds` while the variables update."),
+       Real time: waits `seconds` while the variables update.\n\
+       `seconds` is 0 to 1e9; Ctrl-C stops a run where it is (host)."),
     c("main", Var, "Return to the main menu", "main", "Lists the hardware commands; they work from either menu."),
     c("printv", Var, "Print value of a variable", "printv varname", "Prints 'name - value'."),
     c("printvars", Var, "Print the variable table", "printvars",

@@ -3,7 +3,8 @@
 //! Tolerances that let the thesis' transcripts run unchanged: a leading `$>` prompt is skipped;
 //! a token starting with `(` begins a comment (the thesis annotates `$> adc 0 100 (set adc 0 to
 //! 100Hz)`), as does `#`; the typographic minus `−` and asterisk `∗` of the printed scripts are
-//! read as `-` and `*` (see [`normalize`]).
+//! read as `-` and `*` (see [`normalize`]). A UTF-8 byte-order mark at the start of a line (the
+//! first line of a file saved by some editors) is skipped.
 
 use crate::capacity::MAX_TOKENS;
 use crate::error::{tok, Error, Result};
@@ -16,6 +17,8 @@ pub(crate) struct Tokens<'a> {
 
 impl<'a> Tokens<'a> {
     pub(crate) fn split(line: &'a str) -> Result<Self> {
+        // A byte-order mark (an editor's first character of a UTF-8 file) is not text.
+        let line = line.strip_prefix('\u{feff}').unwrap_or(line);
         let mut t = Tokens {
             items: [""; MAX_TOKENS],
             len: 0,

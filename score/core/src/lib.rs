@@ -48,7 +48,7 @@ pub mod text;
 mod vars;
 
 pub use capacity::{Capacities, CAPACITIES};
-pub use command::Outcome;
+pub use command::{run_seconds, Outcome, RUN_EXPECTED};
 pub use engine::{Engine, Menu};
 pub use error::{Error, Result};
 pub use num::{Num, Real};

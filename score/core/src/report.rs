@@ -293,6 +293,9 @@ impl<N: Real> Engine<N> {
                 Hz(t.mhz),
                 t.missed
             );
+            if t.held > 0 {
+                let _ = write!(out, ", {} held (input not finite)", t.held);
+            }
         } else if sym.kind.is_lazy() {
             let _ = write!(out, ", evaluated on demand");
         }

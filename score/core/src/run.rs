@@ -33,16 +33,23 @@ fn operand<N: Real>(values: &[N; MAX_SYMBOLS], o: Operand<N>) -> N {
 
 /// The new value of a lazy variable other than an expression from its inputs' stored values
 /// (`old` for other kinds).
+/// A scale or saturation limits what it passes to `[lo, hi]`: an infinite input gives the
+/// limit on its side, and NaN (which has no side) the point of `[lo, hi]` nearest 0 — 0 itself
+/// when the limits straddle it, so a duty or a command behind a saturation goes to rest.
 fn compute_lazy<N: Real>(kind: &Kind<N>, values: &[N; MAX_SYMBOLS], old: N) -> N {
-    match *kind {
+    let (y, lo, hi) = match *kind {
         Kind::Scale { src, a, b, c, d } => {
             let y = c + (at(values, src) - a) * (d - c) / (b - a);
             let (lo, hi) = if c <= d { (c, d) } else { (d, c) };
-            clamp(y, lo, hi)
+            (y, lo, hi)
         }
-        Kind::Sat { src, lo, hi } => clamp(at(values, src), lo, hi),
-        _ => old,
-    }
+        Kind::Sat { src, lo, hi } => (at(values, src), lo, hi),
+        _ => return old,
+    };
+    // NaN fails every comparison: `y == y` is the one-compare test for it.
+    #[allow(clippy::eq_op)]
+    let y = if y == y { y } else { N::ZERO };
+    clamp(y, lo, hi)
 }
 
 fn stream_id(streams: &[Option<Stream>], slot: u8) -> Option<StreamId> {
@@ -213,13 +220,14 @@ impl<N: Real> Engine<N> {
         let old = values[i];
         // An ADC's raw task also stores its volts variable.
         let mut volts_update = None;
-        let value = match &mut sym.kind {
+        // `None` from a block: its input or result was not finite; it holds its value.
+        let value: Option<N> = match &mut sym.kind {
             Kind::AdcRaw { input, volts } => match hal.adc_read(*input) {
                 Ok(raw) => {
                     volts_update = Some((volts.0 as usize, Self::volts(*input, raw, hal)));
-                    N::from_u32(raw as u32)
+                    Some(N::from_u32(raw as u32))
                 }
-                Err(_) => old,
+                Err(_) => Some(old),
             },
             Kind::Int { src, st } => st.step(t, at(values, *src)),
             Kind::Wind {
@@ -249,34 +257,13 @@ impl<N: Real> Engine<N> {
                     operand(values, *ki),
                     operand(values, *kd),
                 );
-                let before = int.acc;
-                let i_term = int.step(t, e);
-                let d_term = der.step(t, e);
-                let u = kp * e + ki * i_term + kd * d_term;
-                match *limits {
-                    None => u,
-                    Some((lo, hi)) => {
-                        // Conditional integration: a step that would push the output further
-                        // into saturation only goes as far as the limit (never past the value
-                        // before the step, so it neither winds up nor unwinds by itself).
-                        let limit = if u > hi && e * ki > N::ZERO {
-                            Some(hi)
-                        } else if u < lo && e * ki < N::ZERO {
-                            Some(lo)
-                        } else {
-                            None
-                        };
-                        if let Some(limit) = limit {
-                            let target = (limit - kp * e - kd * d_term) / ki;
-                            let (a, b) = if before <= i_term {
-                                (before, i_term)
-                            } else {
-                                (i_term, before)
-                            };
-                            int.acc = clamp(target, a, b);
-                        }
-                        clamp(kp * e + ki * int.acc + kd * d_term, lo, hi)
-                    }
+                if !(e.is_finite() && kp.is_finite() && ki.is_finite() && kd.is_finite()) {
+                    // Hold the output; the integral and derivative start afresh after the gap.
+                    int.last = None;
+                    der.last = None;
+                    None
+                } else {
+                    pid_step(t, e, kp, ki, kd, *limits, int, der)
                 }
             }
             Kind::PwmFollow { src, out, .. } => {
@@ -287,13 +274,14 @@ impl<N: Real> Engine<N> {
                     N::ZERO
                 };
                 let applied = hal.pwm_set_duty(*out, duty.to_f64() as f32);
-                N::from_f64(applied as f64) * N::from_u32(100)
+                Some(N::from_f64(applied as f64) * N::from_u32(100))
             }
-            Kind::GpioIn { pin } => bool_num(hal.gpio_read(*pin)),
+            Kind::GpioIn { pin } => Some(bool_num(hal.gpio_read(*pin))),
             Kind::GpioOut { src, pin } => {
+                // NaN compares false: the pin goes low.
                 let high = at(values, *src) >= N::HALF;
                 hal.gpio_write(*pin, high);
-                bool_num(high)
+                Some(bool_num(high))
             }
             Kind::Infile {
                 stream,
@@ -304,9 +292,9 @@ impl<N: Real> Engine<N> {
                     let v = N::from_f64(hal.input_sample(id, *cursor));
                     // The cursor stays below `len` (it starts at 0): wrap without a division.
                     *cursor = if *cursor + 1 >= *len { 0 } else { *cursor + 1 };
-                    v
+                    Some(v)
                 }
-                _ => old,
+                _ => Some(old),
             },
             Kind::Log { src, stream } => {
                 let x = at(values, *src);
@@ -317,11 +305,19 @@ impl<N: Real> Engine<N> {
                         hal.write_log(id, w.as_str());
                     }
                 }
-                x
+                Some(x)
             }
-            _ => old,
+            _ => Some(old),
         };
-        values[i] = value;
+        values[i] = match value {
+            Some(v) => v,
+            None => {
+                if let Some(task) = &mut sym.task {
+                    task.held = task.held.saturating_add(1);
+                }
+                old
+            }
+        };
         if let Some((v, x)) = volts_update {
             if syms.get(v).is_some_and(|s| s.is_some()) {
                 values[v] = x;
@@ -339,6 +335,53 @@ impl<N: Real> Engine<N> {
             _ => v,
         }
     }
+}
+
+/// One update of a PID with finite error and gains (the trapezoid and two-point methods of
+/// `defint`/`defdiff`); with limits the output is clamped and the integral stops at the limit.
+/// `None` if a part overflows: the caller holds the output.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn pid_step<N: Real>(
+    t: u64,
+    e: N,
+    kp: N,
+    ki: N,
+    kd: N,
+    limits: Option<(N, N)>,
+    int: &mut crate::symbol::Trapezoid<N>,
+    der: &mut crate::symbol::TwoPoint<N>,
+) -> Option<N> {
+    let before = int.acc;
+    let i_term = int.step(t, e)?;
+    let d_term = der.step(t, e)?;
+    let u = kp * e + ki * i_term + kd * d_term;
+    let out = match limits {
+        None => u,
+        Some((lo, hi)) => {
+            // Conditional integration: a step that would push the output further into
+            // saturation only goes as far as the limit (never past the value before the step,
+            // so it neither winds up nor unwinds by itself).
+            let limit = if u > hi && e * ki > N::ZERO {
+                Some(hi)
+            } else if u < lo && e * ki < N::ZERO {
+                Some(lo)
+            } else {
+                None
+            };
+            if let Some(limit) = limit {
+                let target = (limit - kp * e - kd * d_term) / ki;
+                let (a, b) = if before <= i_term {
+                    (before, i_term)
+                } else {
+                    (i_term, before)
+                };
+                int.acc = clamp(target, a, b);
+            }
+            clamp(kp * e + ki * int.acc + kd * d_term, lo, hi)
+        }
+    };
+    out.is_finite().then_some(out)
 }
 
 #[inline]

@@ -45,14 +45,24 @@ pub(crate) struct Trapezoid<N> {
 
 impl<N: Real> Trapezoid<N> {
     /// Adds the sample `x` taken at `t_us`; the first sample only sets the starting point.
+    /// `None` (the sum unchanged) for a sample that is not finite, after which the next finite
+    /// sample starts afresh (the gap adds nothing), or a sum that would overflow.
     #[inline]
-    pub fn step(&mut self, t_us: u64, x: N) -> N {
-        if let Some((t0, x0)) = self.last {
-            let dt = self.dt.seconds(t_us.saturating_sub(t0));
-            self.acc = self.acc + ((x0 + x) * dt).halve();
+    pub fn step(&mut self, t_us: u64, x: N) -> Option<N> {
+        if !x.is_finite() {
+            self.last = None;
+            return None;
         }
-        self.last = Some((t_us, x));
-        self.acc
+        let last = self.last.replace((t_us, x));
+        if let Some((t0, x0)) = last {
+            let dt = self.dt.seconds(t_us.saturating_sub(t0));
+            let acc = self.acc + ((x0 + x) * dt).halve();
+            if !acc.is_finite() {
+                return None;
+            }
+            self.acc = acc;
+        }
+        Some(self.acc)
     }
 }
 
@@ -65,15 +75,25 @@ pub(crate) struct TwoPoint<N> {
 }
 
 impl<N: Real> TwoPoint<N> {
+    /// The derivative after sample `x` at `t_us`. `None` (the output unchanged) for a sample
+    /// that is not finite, after which the next finite sample starts afresh, or a quotient
+    /// that overflows.
     #[inline]
-    pub fn step(&mut self, t_us: u64, x: N) -> N {
-        if let Some((t0, x0)) = self.last {
+    pub fn step(&mut self, t_us: u64, x: N) -> Option<N> {
+        if !x.is_finite() {
+            self.last = None;
+            return None;
+        }
+        if let Some((t0, x0)) = self.last.replace((t_us, x)) {
             if t_us > t0 {
-                self.out = (x - x0) / self.dt.seconds(t_us - t0);
+                let out = (x - x0) / self.dt.seconds(t_us - t0);
+                if !out.is_finite() {
+                    return None;
+                }
+                self.out = out;
             }
         }
-        self.last = Some((t_us, x));
-        self.out
+        Some(self.out)
     }
 }
 
@@ -101,9 +121,13 @@ impl<N: Real> LowPass<N> {
     }
 
     /// The output after sample `x` at `t_us`, from the previous output `y`: the first sample
-    /// passes through; a repeated instant leaves `y`.
+    /// passes through; a repeated instant leaves `y`. `None` (the output and the state
+    /// unchanged) for a sample that is not finite: the filter holds through it.
     #[inline]
-    pub fn step(&mut self, t_us: u64, x: N, y: N) -> N {
+    pub fn step(&mut self, t_us: u64, x: N, y: N) -> Option<N> {
+        if !x.is_finite() {
+            return None;
+        }
         let out = match self.last_t {
             Some(t0) if t_us > t0 => {
                 let us = t_us - t0;
@@ -118,7 +142,7 @@ impl<N: Real> LowPass<N> {
             None => x,
         };
         self.last_t = Some(t_us);
-        out
+        Some(out)
     }
 }
 
@@ -312,6 +336,8 @@ pub(crate) struct Task {
     frac: u32,
     /// Updates skipped because the port called `tick` more than a period late.
     pub missed: u32,
+    /// Updates of a block whose input (or result) was not finite, so it held its value.
+    pub held: u32,
     /// Instant of the latest update (`None` before the first).
     pub last: Option<u64>,
 }
@@ -325,6 +351,7 @@ impl Task {
             due: None,
             frac: 0,
             missed: 0,
+            held: 0,
             last: None,
         };
         t.set_rate(mhz);

@@ -122,6 +122,13 @@ impl<N: Real> Engine<N> {
         task.and_then(|t| t.last)
     }
 
+    /// Updates in which the block `id` (`defint`, `defwind`, `defdiff`, `deflpf`, `defpid`)
+    /// held its value because its input, a gain, or its result was not finite (NaN or ±inf,
+    /// e.g. from a division by zero upstream). The block resumes with the next finite input.
+    pub fn held_updates(&self, id: VarId) -> Option<u32> {
+        self.sym(id).and_then(|s| s.task).map(|t| t.held)
+    }
+
     /// Updates skipped by the scheduler for `id` because ticks came more than a period late.
     pub fn missed_updates(&self, id: VarId) -> Option<u32> {
         self.sym(id).and_then(|s| s.task).map(|t| t.missed)

@@ -51,7 +51,10 @@ const CORPUS: &[(&str, &str)] = &[
     ("help frob", "help: 'frob' is not a command name (type 'help' for the list)"),
     ("infile two 100 missing.txt", "infile: 'missing.txt' refused by the hardware: file could not be opened, read or parsed"),
     ("log Lx I 100", "log: missing filename (usage: log [logname] varname frequency filename)"),
-    ("run -1", "run: '-1' is not a duration in seconds (0 or more)"),
+    ("run -1", "run: '-1' is not a duration in seconds from 0 to 1e9"),
+    ("run 1e30", "run: '1e30' is not a duration in seconds from 0 to 1e9"),
+    ("run inf", "run: 'inf' is not a duration in seconds from 0 to 1e9"),
+    ("run nan", "run: 'nan' is not a duration in seconds from 0 to 1e9"),
     ("gpio 99 10", "gpio: '99' is not a GPIO pin number of this board"),
     ("var now", "var: unexpected 'now' after the last argument (usage: var)"),
 ];

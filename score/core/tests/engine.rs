@@ -39,7 +39,15 @@ fn defexp_echoes_the_tree_and_forward_references_resolve() {
     let (mut e, mut b) = engine();
     let out = run(&mut e, &mut b, "defexp target adca 1 \u{2212}");
     let echo: Vec<&str> = out.lines().map(str::trim).collect();
-    assert_eq!(echo, ["-", "adca", "1.000000"]);
+    assert_eq!(
+        echo,
+        [
+            "-",
+            "adca",
+            "1.000000",
+            "note: 'adca' is not defined yet; it reads 0 until it is"
+        ]
+    );
     // adca is a placeholder (reads 0) until the ADC exists, then the same slot is the channel.
     assert_eq!(e.value_of("target"), Some(-1.0));
     assert_eq!(

@@ -208,7 +208,15 @@ impl Gpio for SimHw {
 
 enum Slot {
     Input(Vec<f64>),
-    Log(BufWriter<File>),
+    Log(Log),
+}
+
+/// An open log: its writer, and what the non-finite warning needs.
+struct Log {
+    w: BufWriter<File>,
+    path: PathBuf,
+    lines: u64,
+    warned: bool,
 }
 
 /// `infile`/`log` files, relative to a base directory. Playback files are read whole at `infile`
@@ -252,8 +260,8 @@ impl Files {
     /// Flushes every open log.
     pub fn flush(&mut self) {
         for s in self.slots.iter_mut().flatten() {
-            if let Slot::Log(w) = s {
-                let _ = w.flush();
+            if let Slot::Log(log) = s {
+                let _ = log.w.flush();
             }
         }
     }
@@ -271,7 +279,9 @@ impl Files {
         Ok(StreamId(i as u8))
     }
 
-    /// Parses a playback file: one number per line; blank lines are skipped.
+    /// Parses a playback file: one number per line; blank lines are skipped. A log's
+    /// non-finite values (`NaN`, `inf`, `-inf`) read back as themselves, so a log plays back
+    /// exactly what was recorded.
     pub fn read_numbers(path: &Path) -> Result<Vec<f64>, String> {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
         let mut data = Vec::new();
@@ -281,8 +291,8 @@ impl Files {
                 continue;
             }
             match t.parse::<f64>() {
-                Ok(v) if v.is_finite() => data.push(v),
-                _ => {
+                Ok(v) => data.push(v),
+                Err(_) => {
                     return Err(format!(
                         "{}:{}: '{t}' is not a number",
                         path.display(),
@@ -332,17 +342,35 @@ impl DataFiles for Files {
             eprintln!("log: {}: {e}", p.display());
             HalError::Io
         })?;
-        self.insert(Slot::Log(BufWriter::new(f)))
+        self.insert(Slot::Log(Log {
+            w: BufWriter::new(f),
+            path: p,
+            lines: 0,
+            warned: false,
+        }))
     }
+    /// Writes one value; the first non-finite one of each log is also reported on stderr (with
+    /// the log's line), since it usually means a division by zero or an overflow upstream.
     fn write_log(&mut self, id: StreamId, text: &str) {
-        if let Some(Some(Slot::Log(w))) = self.slots.get_mut(id.0 as usize) {
-            let _ = writeln!(w, "{text}");
+        if let Some(Some(Slot::Log(log))) = self.slots.get_mut(id.0 as usize) {
+            let _ = writeln!(log.w, "{text}");
+            log.lines += 1;
+            // The three texts Display gives non-finite numbers.
+            if !log.warned && matches!(text, "NaN" | "inf" | "-inf") {
+                log.warned = true;
+                eprintln!(
+                    "warning: log: {}:{}: the value is {text} (not finite; a division by zero or \
+                     an overflow upstream?); infile plays it back as {text}",
+                    log.path.display(),
+                    log.lines
+                );
+            }
         }
     }
     fn close(&mut self, id: StreamId) {
         if let Some(slot) = self.slots.get_mut(id.0 as usize) {
-            if let Some(Slot::Log(mut w)) = slot.take() {
-                let _ = w.flush();
+            if let Some(Slot::Log(mut log)) = slot.take() {
+                let _ = log.w.flush();
             }
         }
     }

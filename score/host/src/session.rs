@@ -3,6 +3,8 @@
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use score_core::hal::AdcInput;
@@ -34,13 +36,16 @@ pub enum SessionError {
         /// What went wrong.
         message: String,
     },
-    /// A line of a script failed; the lines before it have run.
-    #[error("{path}:{line}: {source}")]
+    /// A line of a script failed; the lines before it have run. Shown as `path:line:column:`
+    /// (the column of the token the message is about, as compilers do) or `path:line:`.
+    #[error("{path}:{line}:{} {source}", column.map(|c| format!("{c}:")).unwrap_or_default())]
     Script {
         /// The script.
         path: String,
         /// 1-based line number.
         line: usize,
+        /// 1-based column (in characters) of the token the error is about, if it has one.
+        column: Option<usize>,
         /// The failure.
         source: Box<SessionError>,
     },
@@ -53,6 +58,43 @@ pub enum SessionError {
     /// Scripts calling scripts too deeply (probably a loop).
     #[error("script: scripts nest more than {0} deep")]
     TooDeep(usize),
+    /// A `run` was stopped by [`Session::set_interrupt`]'s flag (Ctrl-C in the `score` binary);
+    /// every update before `at_s` has run, the clock stands at `at_s`.
+    #[error("run: interrupted at t = {at_s:.6} s")]
+    Interrupted {
+        /// Session time when the run stopped, in seconds.
+        at_s: f64,
+    },
+    /// The simulated clock (microseconds in a `u64`) cannot advance that far.
+    #[error("run: {seconds} s from t = {now_s:.6} s would pass the end of the simulated clock ({end_s:.0} s)")]
+    ClockEnd {
+        /// The requested duration.
+        seconds: f64,
+        /// The clock now, in seconds.
+        now_s: f64,
+        /// The last instant the clock can hold, in seconds.
+        end_s: f64,
+    },
+}
+
+impl SessionError {
+    /// The 1-based column of `line` (the line that failed) that the error is about: the
+    /// engine's errors point at a token ([`score_core::Error::column`]).
+    pub fn column(&self, line: &str) -> Option<usize> {
+        match self {
+            SessionError::Score(e) => e.column(line),
+            _ => None,
+        }
+    }
+}
+
+/// The lines of a script file: a UTF-8 byte-order mark before the first is dropped.
+fn script_lines(text: &str) -> impl Iterator<Item = (usize, &str)> {
+    text.strip_prefix('\u{feff}')
+        .unwrap_or(text)
+        .lines()
+        .enumerate()
+        .map(|(n, l)| (n + 1, l))
 }
 
 const MAX_SCRIPT_DEPTH: usize = 8;
@@ -65,6 +107,7 @@ pub struct Session {
     start: Instant,
     sim_now: u64,
     depth: usize,
+    interrupt: Option<Arc<AtomicBool>>,
     /// Print `$> line` before running each line of a script (transcript style).
     pub echo_scripts: bool,
 }
@@ -79,8 +122,21 @@ impl Session {
             start: Instant::now(),
             sim_now: 0,
             depth: 0,
+            interrupt: None,
             echo_scripts: false,
         }
+    }
+
+    /// A flag that stops a `run` in progress when it becomes true (the `score` binary sets it
+    /// on SIGINT). The run ends with [`SessionError::Interrupted`] and clears the flag.
+    pub fn set_interrupt(&mut self, flag: Arc<AtomicBool>) {
+        self.interrupt = Some(flag);
+    }
+
+    fn interrupted(&self) -> bool {
+        self.interrupt
+            .as_ref()
+            .is_some_and(|f| f.swap(false, Ordering::Relaxed))
     }
 
     /// The time mode.
@@ -120,35 +176,69 @@ impl Session {
             .map(|d| Duration::from_micros(d.saturating_sub(self.now_us())))
     }
 
-    /// Advances time by `seconds`: simulated, every update due before the end runs at its own
-    /// instant; real time, the session waits and runs updates as they fall due.
-    pub fn advance(&mut self, seconds: f64) {
-        let span = (seconds * 1e6).round().max(0.0) as u64;
-        match self.mode {
-            TimeMode::Simulated => {
-                let end = self.sim_now + span;
-                while let Some(t) = self.engine.next_deadline() {
-                    if t >= end {
-                        break;
-                    }
-                    self.sim_now = self.sim_now.max(t);
-                    self.engine.tick(t, &mut self.board);
-                }
-                self.sim_now = end;
+    /// Advances time by `seconds` (checked as `run` checks it: a finite number from 0 to
+    /// [`score_core::capacity::MAX_RUN_SECONDS`]): simulated, every update due before the end
+    /// runs at its own instant; real time, the session waits and runs updates as they fall due.
+    /// The interrupt flag ([`Session::set_interrupt`]) stops it early.
+    pub fn advance(&mut self, seconds: f64) -> Result<(), SessionError> {
+        if !(0.0..=score_core::capacity::MAX_RUN_SECONDS).contains(&seconds) {
+            return Err(score_core::Error::Invalid {
+                command: "run",
+                token: score_core::error::Token::truncated(&seconds.to_string()),
+                expected: score_core::RUN_EXPECTED,
             }
+            .into());
+        }
+        let span = (seconds * 1e6).round() as u64;
+        let result = match self.mode {
+            TimeMode::Simulated => self.advance_simulated(seconds, span),
             TimeMode::RealTime => {
                 let end = Instant::now() + Duration::from_micros(span);
                 loop {
                     let wait = self.poll().unwrap_or(Duration::from_millis(10));
                     let left = end.saturating_duration_since(Instant::now());
                     if left.is_zero() {
-                        break;
+                        break Ok(());
+                    }
+                    if self.interrupted() {
+                        break Err(SessionError::Interrupted {
+                            at_s: self.now_us() as f64 / 1e6,
+                        });
                     }
                     std::thread::sleep(wait.min(left).min(Duration::from_millis(10)));
                 }
             }
-        }
+        };
         self.board.files.flush();
+        result
+    }
+
+    fn advance_simulated(&mut self, seconds: f64, span: u64) -> Result<(), SessionError> {
+        let end = self
+            .sim_now
+            .checked_add(span)
+            .ok_or(SessionError::ClockEnd {
+                seconds,
+                now_s: self.sim_now as f64 / 1e6,
+                end_s: u64::MAX as f64 / 1e6,
+            })?;
+        let mut ticks = 0u32;
+        while let Some(t) = self.engine.next_deadline() {
+            if t >= end {
+                break;
+            }
+            self.sim_now = self.sim_now.max(t);
+            self.engine.tick(t, &mut self.board);
+            // An atomic load per 1024 instants: nothing next to an update.
+            ticks = ticks.wrapping_add(1);
+            if ticks.is_multiple_of(1024) && self.interrupted() {
+                return Err(SessionError::Interrupted {
+                    at_s: self.sim_now as f64 / 1e6,
+                });
+            }
+        }
+        self.sim_now = end;
+        Ok(())
     }
 
     /// Runs one line (engine command or host command), writing its output to `out`.
@@ -172,7 +262,7 @@ impl Session {
                     message: e.to_string(),
                 })?;
             }
-            Outcome::Run(s) => self.advance(s),
+            Outcome::Run(s) => self.advance(s)?,
         }
         Ok(())
     }
@@ -193,14 +283,15 @@ impl Session {
         let text = self.read_script(path)?;
         self.depth += 1;
         let mut result = Ok(());
-        for (n, l) in text.lines().enumerate() {
+        for (n, l) in script_lines(&text) {
             if self.echo_scripts && !l.trim().is_empty() {
                 let _ = writeln!(out, "{}{}", score_core::PROMPT, l.trim());
             }
             if let Err(e) = self.line(l, out) {
                 result = Err(SessionError::Script {
                     path: path.to_string(),
-                    line: n + 1,
+                    line: n,
+                    column: e.column(l),
                     source: Box::new(e),
                 });
                 break;
@@ -217,11 +308,12 @@ impl Session {
         let mut dry: Engine<Num> = Engine::new();
         let mut board = board::dry_run(&self.board);
         let mut sink = String::new();
-        for (n, l) in text.lines().enumerate() {
+        for (n, l) in script_lines(&text) {
             let fail = |e: SessionError| {
                 SessionError::Load(Box::new(SessionError::Script {
                     path: path.to_string(),
-                    line: n + 1,
+                    line: n,
+                    column: e.column(l),
                     source: Box::new(e),
                 }))
             };
@@ -237,12 +329,13 @@ impl Session {
             }
         }
         self.engine.clear(&mut self.board);
-        for (n, l) in text.lines().enumerate() {
+        for (n, l) in script_lines(&text) {
             self.engine
                 .execute(l, &mut self.board, out)
                 .map_err(|e| SessionError::Script {
                     path: path.to_string(),
-                    line: n + 1,
+                    line: n,
+                    column: e.column(l),
                     source: Box::new(e.into()),
                 })?;
         }
@@ -274,7 +367,7 @@ impl Session {
                     "T" | "t" => AdcInput::Temperature,
                     c => AdcInput::Single(c.parse().map_err(|_| SessionError::Sim(format!("'{c}' is not an ADC channel (0-3, A, B, T)")))?),
                 };
-                let volts: f32 = v.parse().map_err(|_| SessionError::Sim(format!("'{v}' is not a voltage")))?;
+                let volts: f32 = v.parse().ok().filter(|v: &f32| v.is_finite()).ok_or_else(|| SessionError::Sim(format!("'{v}' is not a voltage")))?;
                 hw.set_volts(input, volts).map_err(|e| SessionError::Sim(format!("'{ch}': {e}")))?;
             }
             ["noise", n] => {

@@ -89,7 +89,7 @@ fn save_then_load_recreates_the_table_and_a_bad_file_changes_nothing() {
     let err = s.line("load bad.score", &mut out).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "load: nothing changed: bad.score:2: defexp: in the expression at '+': this operator needs two \
+        "load: nothing changed: bad.score:2:12: defexp: in the expression at '+': this operator needs two \
          operands before it (postfix: 'a b +')"
     );
     assert!(*s.engine() == snapshot);
@@ -107,7 +107,7 @@ fn script_errors_name_file_and_line() {
     let err = s.line("script s.score", &mut String::new()).unwrap_err();
     assert_eq!(
         err.to_string(),
-        "s.score:3: adc: '9' is not an ADC channel of this board (expected 0-3, A-B or T)"
+        "s.score:3:5: adc: '9' is not an ADC channel of this board (expected 0-3, A-B or T)"
     );
     assert!(s.engine().lookup("k").is_some() && s.engine().lookup("never").is_none());
 }

@@ -47,7 +47,7 @@ fn run_transcript(file: &str, check: Check) {
                 .line(command, &mut out)
                 .unwrap_or_else(|e| panic!("{file}: {command}: {e}"));
             // A person types: let simulated time pass between lines so the variables update.
-            session.advance(0.25);
+            session.advance(0.25).unwrap();
             out
         })
         .unwrap_or_else(|m| panic!("{m}"));

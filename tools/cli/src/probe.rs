@@ -33,6 +33,7 @@ impl Probe {
                 context: "node name".into(),
                 detail: format!("{e:?}"),
             })?;
+        domain.prepare_dirs()?;
         let node = NodeBuilder::new()
             .name(&name)
             .config(domain.iceoryx2_config())

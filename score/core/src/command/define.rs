@@ -215,6 +215,13 @@ impl<N: Real> Engine<N> {
         }
         if let Some(id) = self.lookup(name) {
             self.write_tree(id, out);
+            if let Some(v) = self.value(id).filter(|v| !v.is_finite()) {
+                let _ = writeln!(
+                    out,
+                    "note: '{name}' is {v} now (a division by zero, an overflow, or a function \
+                     outside its domain)"
+                );
+            }
         }
         Ok(())
     }

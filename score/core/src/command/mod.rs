@@ -13,15 +13,34 @@ mod hardware;
 
 use core::fmt::Write;
 
-use crate::capacity::MAX_SYMBOLS;
+use crate::capacity::{MAX_RUN_SECONDS, MAX_SYMBOLS};
 use crate::engine::{Engine, Menu};
 use crate::error::{tok, Error, Result};
 use crate::hal::Hal;
 use crate::help;
 use crate::lexer::{parse_number, Tokens};
 use crate::num::Real;
+use crate::symbol::{Kind, SymSet};
+use crate::VarId;
 
 use args::Args;
+
+/// What `run` expects, in its error message and in the ports' own option checks.
+pub const RUN_EXPECTED: &str = "a duration in seconds from 0 to 1e9";
+
+/// Parses the argument of `run` (and a port's `--run` option): a finite number of seconds in
+/// `0..=`[`MAX_RUN_SECONDS`]. `inf`, `nan`, negative and larger values are refused with the
+/// same message as `run`.
+pub fn run_seconds(token: &str) -> Result<f64> {
+    parse_number::<f64>(token)
+        .filter(|s| (0.0..=MAX_RUN_SECONDS).contains(s))
+        .map(|s| s + 0.0) // -0 is 0
+        .ok_or(Error::Invalid {
+            command: "run",
+            token: tok(token),
+            expected: RUN_EXPECTED,
+        })
+}
 
 /// What the port must do after a successful command. File and time commands are carried out by
 /// the port, which owns files and the clock.
@@ -55,6 +74,7 @@ impl<N: Real> Engine<N> {
             return Ok(Outcome::Done);
         };
         let spec = help::spec(word).ok_or(Error::UnknownCommand { token: tok(word) })?;
+        let placeholders_before = self.placeholders();
         let mut a = Args {
             cmd: spec.name,
             usage: spec.usage,
@@ -148,14 +168,7 @@ impl<N: Real> Engine<N> {
             "run" => {
                 let t = a.next("seconds")?;
                 a.end()?;
-                let s = parse_number::<f64>(t)
-                    .filter(|s| *s >= 0.0)
-                    .ok_or(Error::Invalid {
-                        command: "run",
-                        token: tok(t),
-                        expected: "a duration in seconds (0 or more)",
-                    })?;
-                return Ok(Outcome::Run(s));
+                return Ok(Outcome::Run(run_seconds(t)?));
             }
             "clear" => {
                 a.end()?;
@@ -199,7 +212,44 @@ impl<N: Real> Engine<N> {
             "log" => self.cmd_log(&mut a, hal)?,
             _ => return Err(Error::UnknownCommand { token: tok(word) }),
         }
+        self.note_new_placeholders(placeholders_before, out);
         Ok(Outcome::Done)
+    }
+
+    /// The slots holding placeholders (names used before their definition).
+    fn placeholders(&self) -> SymSet {
+        let mut set = SymSet::EMPTY;
+        for (i, s) in self.syms.iter().enumerate() {
+            if matches!(s, Some(s) if matches!(s.kind, Kind::Placeholder)) {
+                set.insert(i);
+            }
+        }
+        set
+    }
+
+    /// A name used before it is defined reads 0 (the thesis defines gains after their use), so
+    /// a misspelt input would silently read 0: say so for every name a command has just made a
+    /// placeholder, with the defined name it most resembles.
+    fn note_new_placeholders(&self, before: SymSet, out: &mut impl Write) {
+        let now = self.placeholders();
+        for i in 0..MAX_SYMBOLS {
+            if !now.contains(i) || before.contains(i) {
+                continue;
+            }
+            let name = self.name_of(VarId(i as u8));
+            let _ = write!(
+                out,
+                "note: '{name}' is not defined yet; it reads 0 until it is"
+            );
+            let similar =
+                self.syms.iter().flatten().find(|s| {
+                    !matches!(s.kind, Kind::Placeholder) && similar(s.name.as_str(), name)
+                });
+            let _ = match similar {
+                Some(s) => writeln!(out, " (did you mean '{}'?)", s.name),
+                None => writeln!(out),
+            };
+        }
     }
 
     /// [`Engine::execute`], also printing an error as `error: <message>` to `out`.
@@ -214,5 +264,55 @@ impl<N: Real> Engine<N> {
             let _ = writeln!(out, "error: {e}");
         }
         r
+    }
+}
+
+/// Names a typo apart: equal ignoring case, or, both of three characters or more, one edit
+/// apart (a character changed, added, removed, or two neighbours swapped), like `adcO` for
+/// `adc0`.
+fn similar(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.eq_ignore_ascii_case(b) {
+        return true;
+    }
+    if a.len() < 3 || b.len() < 3 {
+        return false;
+    }
+    let prefix = a.iter().zip(b).take_while(|(x, y)| x == y).count();
+    let (a, b) = (&a[prefix..], &b[prefix..]);
+    match (a.len(), b.len()) {
+        (n, m) if n == m => {
+            a[1..] == b[1..] || (n >= 2 && a[0] == b[1] && a[1] == b[0] && a[2..] == b[2..])
+        }
+        (n, m) if n == m + 1 => a[1..] == *b,
+        (n, m) if n + 1 == m => *a == b[1..],
+        _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::similar;
+
+    #[test]
+    fn similar_names_are_one_typo_apart() {
+        for (a, b) in [
+            ("adcO", "adc0"),
+            ("Kp", "kp"),
+            ("Isgnl", "Isgn"),
+            ("sgnl", "sngl"),
+            ("PID", "PIDx"),
+        ] {
+            assert!(similar(a, b) && similar(b, a), "{a} {b}");
+        }
+        for (a, b) in [
+            ("adc0", "adc12"),
+            ("Kp", "Kd"),
+            ("abc", "cba"),
+            ("ab", "abcd"),
+            ("x", "y"),
+        ] {
+            assert!(!similar(a, b), "{a} {b}");
+        }
     }
 }

@@ -38,7 +38,7 @@ pub fn run_script(script: &str, extra: &[&str], seconds: f64) -> (Session, PathB
     for l in extra {
         s.line(l, &mut out).unwrap_or_else(|e| panic!("{l}: {e}"));
     }
-    s.advance(seconds);
+    s.advance(seconds).unwrap();
     (s, dir)
 }
 
