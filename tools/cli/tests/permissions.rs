@@ -8,7 +8,9 @@ mod support;
 
 use std::net::UdpSocket;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use conductor_bus::Domain;
@@ -81,7 +83,7 @@ impl Users {
     }
 
     fn conductor(&self, i: usize, d: &Domain) -> Command {
-        let mut c = self.cmd(i, env!("CARGO_BIN_EXE_conductor"));
+        let mut c = self.cmd(i, staged().join("conductor").to_str().unwrap());
         c.arg("--domain").arg(d.name());
         c
     }
@@ -103,6 +105,32 @@ impl Drop for Users {
             }
         }
     }
+}
+
+/// The `conductor` program and the test manifest where every user can reach them: the checkout
+/// may sit under a directory only root may enter (`/root`), which the test users could not.
+/// Linked (or copied across file systems) once per test binary into `/tmp/conductor-perm-<pid>/`.
+fn staged() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = PathBuf::from(format!("/tmp/conductor-perm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let exe = dir.join("conductor");
+        let _ = std::fs::remove_file(&exe);
+        if std::fs::hard_link(env!("CARGO_BIN_EXE_conductor"), &exe).is_err() {
+            std::fs::copy(env!("CARGO_BIN_EXE_conductor"), &exe).unwrap();
+        }
+        std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let manifest = dir.join("two-subsystems.toml");
+        std::fs::copy(
+            workspace().join("executors/tests/manifests/two-subsystems.toml"),
+            &manifest,
+        )
+        .unwrap();
+        std::fs::set_permissions(&manifest, std::fs::Permissions::from_mode(0o644)).unwrap();
+        dir
+    })
 }
 
 /// Removes what a domain left on disk (files of users that are about to be deleted).
@@ -149,7 +177,7 @@ fn only_the_executors_user_can_read_or_command_its_domain() {
     let (svc, other) = (0, 1);
     let svc_uid = users.uid(svc);
     let d = Domain::unique("perm").unwrap();
-    let manifest = workspace().join("executors/tests/manifests/two-subsystems.toml");
+    let manifest = staged().join("two-subsystems.toml");
     // The binaries must be reachable by the service user (the workspace is world-readable).
     let mut launch = users.conductor(svc, &d);
     launch
@@ -251,7 +279,7 @@ fn a_domain_claimed_by_another_user_is_refused_not_used() {
     let mut launch = users.conductor(svc, &d);
     launch
         .arg("launch")
-        .arg(workspace().join("executors/tests/manifests/two-subsystems.toml"));
+        .arg(staged().join("two-subsystems.toml"));
     launch.args(["--no-rt", "--quiet"]);
     let err = stderr_of(launch);
     assert!(
