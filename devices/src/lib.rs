@@ -46,5 +46,6 @@ pub use nix::errno::Errno;
 pub use outstanding::{Outstanding, Pending};
 pub use queue::{Bounded, Full};
 pub use stage::{
-    Channel, Device, Hardware, HwCounters, HwError, Protocol, ProtocolCounters, SafeAction, TickCtx,
+    BusCondition, Channel, ControllerState, Device, Hardware, HwCounters, HwError, Protocol,
+    ProtocolCounters, SafeAction, TickCtx,
 };

@@ -34,7 +34,9 @@ use nix::errno::Errno;
 
 use crate::message::{Reply, Request};
 use crate::queue::Bounded;
-use crate::stage::{Hardware, HwCounters, HwError, Protocol, ProtocolCounters, TickCtx};
+use crate::stage::{
+    BusCondition, Hardware, HwCounters, HwError, Protocol, ProtocolCounters, TickCtx,
+};
 
 /// Whether a link's bus is there.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -91,6 +93,11 @@ pub trait Link {
     fn flushed(&self) -> bool;
     /// Whether the bus is there.
     fn state(&self) -> LinkState;
+    /// What the hardware reports about its bus (controller state, a full transmit queue);
+    /// the default condition while the bus is down.
+    fn condition(&self) -> BusCondition {
+        BusCondition::default()
+    }
     /// Counters since start.
     fn counters(&self) -> LinkCounters;
     /// Quiets the hardware (flush, close) at the end.
@@ -187,6 +194,8 @@ pub struct LinkOf<P: Protocol, H: Hardware<Word = P::Word>> {
     tx: Bounded<P::Word>,
     rx: Bounded<P::Word>,
     rx_fence: Bounded<u64>,
+    /// Arrival time of each word in `rx` (0: unknown).
+    rx_time: Bounded<u64>,
     rx_buf: Vec<P::Word>,
     /// Replies decoded before `decode` (at `encode`, or from a reset).
     early: Bounded<Reply>,
@@ -219,6 +228,7 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
             tx: Bounded::with_capacity(words),
             rx: Bounded::with_capacity(words),
             rx_fence: Bounded::with_capacity(words),
+            rx_time: Bounded::with_capacity(words),
             rx_buf: vec![fill; words],
             early: Bounded::with_capacity(words.max(64)),
             taken: 0,
@@ -247,12 +257,7 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
 
     fn hw_counters(&self) -> HwCounters {
         let now = self.hardware.as_ref().map(H::counters).unwrap_or_default();
-        HwCounters {
-            nacks: self.past_hw.nacks + now.nacks,
-            ack_timeouts: self.past_hw.ack_timeouts + now.ack_timeouts,
-            error_frames: self.past_hw.error_frames + now.error_frames,
-            discarded: self.past_hw.discarded + now.discarded,
-        }
+        self.past_hw.plus(&now)
     }
 
     /// Drops the queued words (counted), keeping the stream numbering.
@@ -279,15 +284,10 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
         self.drop_tx();
         self.rx.clear();
         self.rx_fence.clear();
+        self.rx_time.clear();
         self.protocol.reset(&mut self.early);
         if let Some(h) = self.hardware.take() {
-            let c = h.counters();
-            self.past_hw = HwCounters {
-                nacks: self.past_hw.nacks + c.nacks,
-                ack_timeouts: self.past_hw.ack_timeouts + c.ack_timeouts,
-                error_frames: self.past_hw.error_frames + c.error_frames,
-                discarded: self.past_hw.discarded + c.discarded,
-            };
+            self.past_hw = self.past_hw.plus(&h.counters());
             match &self.reopen {
                 // The helper drops it (closing a port is a system call we keep off this thread).
                 Some(r) => {
@@ -321,10 +321,12 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
         }
         let n = hw.receive(&mut self.rx_buf[..room], ctx)?;
         let unconfirmed = hw.rx_unconfirmed();
+        let times = hw.rx_times();
         self.rx.extend_from_slice(&self.rx_buf[..n]);
         for i in 0..n {
             let behind = unconfirmed.get(i).copied().unwrap_or(0) as u64;
             let _ = self.rx_fence.push(self.taken.saturating_sub(behind));
+            let _ = self.rx_time.push(times.get(i).copied().unwrap_or(0));
         }
         Ok(())
     }
@@ -332,14 +334,16 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
     /// Decodes what has been received so far into `early`.
     fn decode_pending(&mut self, ctx: TickCtx) {
         if !self.rx.is_empty() {
-            self.protocol.decode(
+            self.protocol.decode_timed(
                 self.rx.as_slice(),
                 self.rx_fence.as_slice(),
+                self.rx_time.as_slice(),
                 &mut self.early,
                 ctx,
             );
             self.rx.clear();
             self.rx_fence.clear();
+            self.rx_time.clear();
         }
     }
 
@@ -424,10 +428,16 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> Link for LinkOf<P, H> {
             let _ = out.push(*r);
         }
         self.early.clear();
-        self.protocol
-            .decode(self.rx.as_slice(), self.rx_fence.as_slice(), out, ctx);
+        self.protocol.decode_timed(
+            self.rx.as_slice(),
+            self.rx_fence.as_slice(),
+            self.rx_time.as_slice(),
+            out,
+            ctx,
+        );
         self.rx.clear();
         self.rx_fence.clear();
+        self.rx_time.clear();
         self.protocol.expire(out, ctx);
     }
 
@@ -448,6 +458,10 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> Link for LinkOf<P, H> {
 
     fn state(&self) -> LinkState {
         self.state
+    }
+
+    fn condition(&self) -> BusCondition {
+        self.hardware.as_ref().map(H::condition).unwrap_or_default()
     }
 
     fn counters(&self) -> LinkCounters {

@@ -39,6 +39,18 @@ impl Pending {
     pub fn reply(&self, data: ReplyData) -> Reply {
         Reply::answer(self.cred, self.op, data, self.tick, self.t_request_ns)
     }
+
+    /// The answer `data`, sampled at the reply's arrival `t_rx_ns` where it is known (not
+    /// before the request: clocks of different sources may disagree by a little), else at
+    /// the request's time.
+    pub fn reply_at(&self, data: ReplyData, t_rx_ns: u64) -> Reply {
+        let t = if t_rx_ns == 0 {
+            self.t_request_ns
+        } else {
+            t_rx_ns.max(self.t_request_ns)
+        };
+        Reply::answer(self.cred, self.op, data, self.tick, t)
+    }
 }
 
 /// Fixed-capacity table of requests in flight, and of recently expired ones (whose replies, if

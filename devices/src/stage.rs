@@ -49,13 +49,64 @@ pub struct HwCounters {
     pub error_frames: u64,
     /// Bytes from the adapter that were not a valid line or frame.
     pub discarded: u64,
+    /// Transmit attempts the OS refused because its queue was full (`ENOBUFS`: a SocketCAN
+    /// interface's `txqueuelen` frames waiting); the frames left go with the next tick's.
+    pub tx_full: u64,
 }
 
 impl HwCounters {
     /// What counts as bus errors.
     pub fn errors(&self) -> u64 {
-        self.nacks + self.ack_timeouts + self.error_frames
+        self.nacks + self.ack_timeouts + self.error_frames + self.tx_full
     }
+
+    /// The sum of two counters (a link's hardware before and after a reopen).
+    pub fn plus(&self, o: &HwCounters) -> HwCounters {
+        HwCounters {
+            nacks: self.nacks + o.nacks,
+            ack_timeouts: self.ack_timeouts + o.ack_timeouts,
+            error_frames: self.error_frames + o.error_frames,
+            discarded: self.discarded + o.discarded,
+            tx_full: self.tx_full + o.tx_full,
+        }
+    }
+}
+
+/// A CAN controller's fault confinement state, as its driver reports it in error frames
+/// (`CAN_ERR_CRTL`, `CAN_ERR_BUSOFF`, `CAN_ERR_RESTARTED`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, PartialOrd, Ord)]
+pub enum ControllerState {
+    /// Error-active: taking part normally (also: no report yet).
+    #[default]
+    Active,
+    /// An error counter passed the warning level (96).
+    Warning,
+    /// Error-passive (a counter passed 127): it may no longer signal errors actively.
+    Passive,
+    /// Bus-off (transmit errors passed 255): it takes no part until it is restarted
+    /// (`restart-ms`, or `ip link set ... type can restart`).
+    BusOff,
+}
+
+impl ControllerState {
+    /// How the state is named in logs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Active => "error-active",
+            Self::Warning => "error-warning",
+            Self::Passive => "error-passive",
+            Self::BusOff => "bus-off",
+        }
+    }
+}
+
+/// What a working transport reports about its bus besides the words it moves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct BusCondition {
+    /// The CAN controller's state (always `Active` where there is none to report).
+    pub controller: ControllerState,
+    /// The OS's transmit queue refused the last frames (`ENOBUFS`).
+    pub tx_full: bool,
 }
 
 /// Gatekeeper to a physical (or simulated) bus: moves words, never interprets them.
@@ -76,6 +127,16 @@ pub trait Hardware {
     /// the protocol stage matches replies with. Empty: every word taken counts as sent.
     fn rx_unconfirmed(&self) -> &[u32] {
         &[]
+    }
+    /// For each word the last [`receive`](Self::receive) returned, when it reached this host
+    /// (CLOCK_MONOTONIC ns: the kernel's receive timestamp, where the transport has one; 0 or
+    /// an empty slice: unknown, the protocol uses its tick's time).
+    fn rx_times(&self) -> &[u64] {
+        &[]
+    }
+    /// The bus's condition as the controller and the OS report it.
+    fn condition(&self) -> BusCondition {
+        BusCondition::default()
     }
     /// Urgent words follow (a safe action): drop the words taken but not yet handed to the OS,
     /// whole words only, and do not hold the next ones back for flow control.
@@ -152,6 +213,20 @@ pub trait Protocol {
         out: &mut Bounded<Reply>,
         ctx: TickCtx,
     );
+    /// As [`decode`](Self::decode), with each word's arrival time where the hardware knows it
+    /// ([`Hardware::rx_times`]; 0 = unknown). Protocols that can use it for sample times
+    /// override this; the default ignores the times.
+    fn decode_timed(
+        &mut self,
+        words: &[Self::Word],
+        fence: &[u64],
+        times: &[u64],
+        out: &mut Bounded<Reply>,
+        ctx: TickCtx,
+    ) {
+        let _ = times;
+        self.decode(words, fence, out, ctx);
+    }
     /// Called after `decode` each protocol tick: report requests whose replies are overdue as
     /// [`crate::ReplyData::Missing`] (never invent a value).
     fn expire(&mut self, out: &mut Bounded<Reply>, ctx: TickCtx);

@@ -10,7 +10,7 @@ use std::sync::mpsc::{self, Receiver, SyncSender, TryRecvError, TrySendError};
 use std::time::{Duration, Instant};
 
 use conductor_devices::device::{AX_MODELS, MX_MODELS, X_MODELS};
-use conductor_devices::{Failure, Phase};
+use conductor_devices::{ControllerState, Failure, Phase};
 
 use crate::manifest::Subsystem;
 use crate::stages::{Event, TripCause};
@@ -77,8 +77,40 @@ impl Names {
                 format!(
                 "{tag}: {} vanished{}: its states are STALE; reopening it (10 ms … 1 s back-off)",
                 link(l),
-                cause.map(|c| format!(" ({c}: {})", c.desc())).unwrap_or_default()
+                // Errno's Display is "ENODEV: No such device".
+                cause.map(|c| format!(" ({c})")).unwrap_or_default()
             )
+            }
+            Event::Controller { link: l, state } => match state {
+                ControllerState::Active => format!(
+                    "{tag}: {}: the CAN controller is error-active again",
+                    link(l)
+                ),
+                ControllerState::BusOff => format!(
+                    "{tag}: {}: the CAN controller reports bus-off: nothing reaches the bus \
+                     until it restarts (restart-ms, see docs/hardware.md); its states go STALE",
+                    link(l)
+                ),
+                s => format!(
+                    "{tag}: {}: the CAN controller reports {} (errors on the bus: wiring, \
+                     termination, bitrate?)",
+                    link(l),
+                    s.name()
+                ),
+            },
+            Event::TxQueue {
+                link: l,
+                full: true,
+            } => format!(
+                "{tag}: {}: transmit queue full (ENOBUFS): frames wait for the next tick; \
+                 is any other node acknowledging? (txqueuelen, see docs/hardware.md)",
+                link(l)
+            ),
+            Event::TxQueue {
+                link: l,
+                full: false,
+            } => {
+                format!("{tag}: {}: transmit queue takes frames again", link(l))
             }
             Event::BusUp { link: l, outage_ns } => format!(
                 "{tag}: {} is back after {:.2} s; bringing its devices up again",

@@ -38,8 +38,8 @@ use conductor_bus::status;
 use conductor_devices::kinds::{self, BuildError, Capacity};
 use conductor_devices::lifecycle::REPROBE_NS;
 use conductor_devices::{
-    Bounded, Credential, Device, DeviceStatus, Errno, Failure, Link, LinkState, Phase, Reply,
-    Request, SafeAction, SafeProgress, Startup, TickCtx, Update,
+    Bounded, BusCondition, ControllerState, Credential, Device, DeviceStatus, Errno, Failure, Link,
+    LinkState, Phase, Reply, Request, SafeAction, SafeProgress, Startup, TickCtx, Update,
 };
 
 use crate::manifest::{Calibration, SafeSpec, Subsystem};
@@ -102,6 +102,21 @@ pub enum Event {
         link: usize,
         /// The OS error, where there was one.
         cause: Option<Errno>,
+    },
+    /// A CAN controller changed state (error-warning, error-passive, bus-off, back to
+    /// error-active), as its driver's error frames say.
+    Controller {
+        /// Protocol index.
+        link: usize,
+        /// The new state.
+        state: ControllerState,
+    },
+    /// The OS's transmit queue filled (frames refused, ENOBUFS) or takes frames again.
+    TxQueue {
+        /// Protocol index.
+        link: usize,
+        /// Full now.
+        full: bool,
     },
     /// A bus is back (its devices are brought up again).
     BusUp {
@@ -252,6 +267,7 @@ struct LinkRt {
     creds: Vec<(Credential, usize)>,
     urgent: bool,
     state: LinkState,
+    condition: BusCondition,
 }
 
 struct Watchdog {
@@ -345,6 +361,7 @@ impl Stages {
                 creds: Vec::with_capacity(cap.devices),
                 urgent: false,
                 state: LinkState::Up,
+                condition: BusCondition::default(),
             })
             .collect();
         let mut dev_rt = Vec::with_capacity(devices.len());
@@ -632,6 +649,24 @@ impl Stages {
 
     /// A link that went down or came back: its devices lose their bus, or are brought up again.
     fn watch_link(&mut self, li: usize, ctx: TickCtx) {
+        // What the controller and the OS say about a bus that is there: one event per change.
+        let cond = self.links[li].link.condition();
+        let had = self.links[li].condition;
+        if cond != had && self.links[li].link.state() == LinkState::Up {
+            self.links[li].condition = cond;
+            if cond.controller != had.controller {
+                self.event(Event::Controller {
+                    link: li,
+                    state: cond.controller,
+                });
+            }
+            if cond.tx_full != had.tx_full {
+                self.event(Event::TxQueue {
+                    link: li,
+                    full: cond.tx_full,
+                });
+            }
+        }
         let now = self.links[li].link.state();
         let was = self.links[li].state;
         if now == was {

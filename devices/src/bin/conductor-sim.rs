@@ -4,6 +4,7 @@
 //! ```text
 //! conductor-sim dxl   --pty-link /tmp/dxl0 --servos 6
 //! conductor-sim slcan --pty-link /tmp/can0 --mit 1,2,3 --odrive 4
+//! conductor-sim socketcan --interface vcan0 --mit 1,2,3 --odrive 4
 //! ```
 //!
 //! The first line on stdout is `ready <device> [link <path>]`. Then each line on stdin is a
@@ -14,9 +15,9 @@
 //!   ignored commands);
 //! * `unplug`, `replug`: the USB adapter leaves and comes back at the same path (`--pty-link`
 //!   needed for `replug`), the servos or motors keeping their state;
-//! * `fault <id> <code>`: `dxl`: latch hardware error bits in servo `id`; `slcan`: MIT fault
-//!   code or ODrive axis error bits for node `id`;
-//! * `clear <id>` (`slcan`): clear node `id`'s fault;
+//! * `fault <id> <code>`: `dxl`: latch hardware error bits in servo `id`; `slcan`,
+//!   `socketcan`: MIT fault code or ODrive axis error bits for node `id`;
+//! * `clear <id>` (`slcan`, `socketcan`): clear node `id`'s fault;
 //! * `stall <ms>`, `acks on|off`, `latency <us>`, `inject <hex bytes>` (`slcan`): the adapter
 //!   stalls, stops acknowledging transmitted frames, lags, or sends raw bytes to the host;
 //! * `quit` (or end of input) stops the simulator.
@@ -34,6 +35,7 @@ use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
 use conductor_devices::sim::fault::FaultConfig;
 use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty, Running};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
+use conductor_devices::sim::socketcan_bus::SocketCanSim;
 use conductor_protocols::slcan::Dialect;
 
 #[derive(Parser)]
@@ -140,6 +142,96 @@ enum Cmd {
         #[arg(long, default_value_t = 0)]
         encoder_ms: u64,
     },
+    /// MIT-mode motors and ODrive axes on a SocketCAN interface (e.g. a vcan: `ip link add
+    /// vcan0 type vcan && ip link set vcan0 up`); they survive the interface going down or
+    /// being re-created. Commands: `stats`, `fault`, `clear`, `quit`.
+    Socketcan {
+        /// The interface (must exist and be up).
+        #[arg(long)]
+        interface: String,
+        /// MIT-mode motor IDs.
+        #[arg(long, value_delimiter = ',')]
+        mit: Vec<u8>,
+        /// ODrive node IDs.
+        #[arg(long, value_delimiter = ',')]
+        odrive: Vec<u8>,
+        /// MIT model (ranges).
+        #[arg(long, default_value = "ak80-9")]
+        model: String,
+        /// MIT motors send 8-byte replies (temperature, fault code).
+        #[arg(long)]
+        long_reply: bool,
+        /// ODrive heartbeat period (ms, 0 = off).
+        #[arg(long, default_value_t = 100)]
+        heartbeat_ms: u64,
+        /// ODrive encoder-estimate period (ms, 0 = off).
+        #[arg(long, default_value_t = 0)]
+        encoder_ms: u64,
+    },
+}
+
+fn node_stats(nodes: &[Box<dyn CanNode>]) -> String {
+    nodes
+        .iter()
+        .map(|n| {
+            let s = n.snapshot();
+            format!(
+                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}, \
+                 \"fault\": {}, \"ignored\": {}}}",
+                s.id, s.position, s.enabled, s.frames_in, s.fault, s.ignored
+            )
+        })
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Serves `stats`, `fault`, `clear` and `quit` on stdin for the SocketCAN nodes.
+fn serve_socketcan(sim: SocketCanSim) {
+    for l in std::io::stdin().lock().lines() {
+        let Ok(l) = l else { break };
+        let words: Vec<&str> = l.split_whitespace().collect();
+        let Some((&cmd, rest)) = words.split_first() else {
+            continue;
+        };
+        let on_node = |id: &str, f: &dyn Fn(&mut dyn CanNode) -> bool| {
+            let id: u8 = number(id)?;
+            let mut nodes = sim.nodes();
+            let n = nodes
+                .iter_mut()
+                .find(|n| n.snapshot().id == id)
+                .ok_or(format!("no node {id}"))?;
+            if f(n.as_mut()) {
+                Ok(())
+            } else {
+                Err(format!("node {id} does not take that fault"))
+            }
+        };
+        let result = match cmd {
+            "stats" => {
+                say(&format!(
+                    "{{\"frames_in\": {}, \"frames_out\": {}, \"reopens\": {}, \"nodes\": [{}]}}",
+                    sim.frames_in(),
+                    sim.frames_out(),
+                    sim.reopens(),
+                    node_stats(&sim.nodes())
+                ));
+                continue;
+            }
+            "quit" => break,
+            "fault" => args::<2>(rest, "fault <id> <code>").and_then(|[id, code]| {
+                let code: u32 = number(&code)?;
+                on_node(&id, &|n| n.set_fault(code))
+            }),
+            "clear" => {
+                args::<1>(rest, "clear <id>").and_then(|[id]| on_node(&id, &|n| n.reset_fault()))
+            }
+            other => Err(format!("not a socketcan command: {other}")),
+        };
+        match result {
+            Ok(()) => say("ok"),
+            Err(why) => say(&format!("error {why}")),
+        }
+    }
 }
 
 fn endpoint(at: &Where) -> std::io::Result<(Endpoint, String)> {
@@ -456,6 +548,31 @@ fn main() {
                 println!("ready {desc}");
                 let _ = std::io::stdout().flush();
                 serve(running, at.stats_ms, slcan_stats, slcan_control);
+            })
+        }
+        Cmd::Socketcan {
+            interface,
+            mit,
+            odrive,
+            model,
+            long_reply,
+            heartbeat_ms,
+            encoder_ms,
+        } => {
+            let Some(limits) = mit_limits(&model) else {
+                eprintln!("conductor-sim: unknown MIT model {model:?}");
+                std::process::exit(2);
+            };
+            let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
+            for id in mit {
+                nodes.push(Box::new(MitMotorSim::new(id, limits, 0, long_reply)));
+            }
+            for n in odrive {
+                nodes.push(Box::new(OdriveAxisSim::new(n, heartbeat_ms, encoder_ms)));
+            }
+            SocketCanSim::start(&interface, nodes).map(|sim| {
+                say(&format!("ready socketcan {interface}"));
+                serve_socketcan(sim);
             })
         }
     };

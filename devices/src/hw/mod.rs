@@ -25,5 +25,8 @@ mod udp;
 pub use memory::{mem_pipe, MemCanBus, MemCanPort, MemPort};
 pub use serial::{SerialHardware, SerialOptions};
 pub use slcan::{SlcanHardware, SlcanOptions, SlcanStats};
-pub use socketcan::{from_socketcan, interface_up, to_socketcan, SocketCanHardware};
+pub use socketcan::{
+    controller_state, from_socketcan, interface_up, realtime_offset_ns, to_socketcan,
+    SocketCanHardware,
+};
 pub use udp::UdpHardware;

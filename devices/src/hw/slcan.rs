@@ -370,6 +370,7 @@ impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
             nacks: self.stats.nacks,
             ack_timeouts: self.stats.ack_timeouts,
             error_frames: 0,
+            tx_full: 0,
             discarded: self.scanner.stats().discarded_bytes(),
         }
     }

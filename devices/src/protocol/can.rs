@@ -146,7 +146,16 @@ impl CanMotorProtocol {
         }
     }
 
-    fn on_frame(&mut self, f: &CanFrame, fence: u64, ctx: TickCtx, out: &mut Bounded<Reply>) {
+    /// `t_rx` is the frame's arrival (CLOCK_MONOTONIC ns, 0 = unknown): a motor samples when
+    /// it answers, so the sample time is the answer's arrival where the kernel stamped it.
+    fn on_frame(
+        &mut self,
+        f: &CanFrame,
+        fence: u64,
+        t_rx: u64,
+        ctx: TickCtx,
+        out: &mut Bounded<Reply>,
+    ) {
         // MIT reply: from the master ID, motor ID in data[0].
         if f.id() == Id::Standard(self.master) && !f.is_remote_frame() && matches!(f.dlc(), 6 | 8) {
             let motor = f.data()[0];
@@ -159,16 +168,22 @@ impl CanMotorProtocol {
                         self.counters.packets_in += 1;
                         if let Some(fault) = rep.extra.and_then(|e| e.fault) {
                             self.counters.device_errors += 1;
-                            let _ = out.push(p.reply(ReplyData::DeviceError {
-                                code: fault.code() as u32,
-                            }));
+                            let _ = out.push(p.reply_at(
+                                ReplyData::DeviceError {
+                                    code: fault.code() as u32,
+                                },
+                                t_rx,
+                            ));
                         }
-                        let _ = out.push(p.reply(ReplyData::Mit {
-                            p: rep.p,
-                            v: rep.v,
-                            t: rep.t,
-                            temperature: rep.extra.map(|e| e.temperature),
-                        }));
+                        let _ = out.push(p.reply_at(
+                            ReplyData::Mit {
+                                p: rep.p,
+                                v: rep.v,
+                                t: rep.t,
+                                temperature: rep.extra.map(|e| e.temperature),
+                            },
+                            t_rx,
+                        ));
                     }
                     Err(_) => {
                         self.counters.rejected_packets += 1;
@@ -202,13 +217,13 @@ impl CanMotorProtocol {
                 // Cyclic messages (heartbeat, encoder estimates) arrive unasked: they are
                 // sampled when received.
                 let reply = match asked {
-                    Some(p) => p.reply(ReplyData::Odrive(msg)),
+                    Some(p) => p.reply_at(ReplyData::Odrive(msg), t_rx),
                     None => Reply {
                         cred,
                         data: ReplyData::Odrive(msg),
                         op: None,
                         tick: ctx.tick,
-                        t_sample_ns: ctx.now_ns,
+                        t_sample_ns: if t_rx == 0 { ctx.now_ns } else { t_rx },
                     },
                 };
                 let _ = out.push(reply);
@@ -254,9 +269,22 @@ impl Protocol for CanMotorProtocol {
         out: &mut Bounded<Reply>,
         ctx: TickCtx,
     ) {
+        self.decode_timed(words, fence, &[], out, ctx);
+    }
+
+    fn decode_timed(
+        &mut self,
+        words: &[CanFrame],
+        fence: &[u64],
+        times: &[u64],
+        out: &mut Bounded<Reply>,
+        ctx: TickCtx,
+    ) {
         for (i, f) in words.iter().enumerate() {
             self.counters.words_in += 1;
-            self.on_frame(f, fence.get(i).copied().unwrap_or(u64::MAX), ctx, out);
+            let fence = fence.get(i).copied().unwrap_or(u64::MAX);
+            let t_rx = times.get(i).copied().unwrap_or(0);
+            self.on_frame(f, fence, t_rx, ctx, out);
         }
     }
 

@@ -9,6 +9,7 @@
 //! * [`hardware`]: the simulators as in-process [`crate::Hardware`], for tests and manifests.
 //! * [`runner`]: the simulators on a pseudo-terminal or UDP socket, as a separate process
 //!   (`conductor-sim`).
+//! * [`socketcan_bus`]: the CAN motors on a real SocketCAN interface (vcan0 in the CAN VM).
 
 mod basic;
 pub mod can_motors;
@@ -17,5 +18,6 @@ pub mod fault;
 pub mod hardware;
 pub mod runner;
 pub mod slcan_adapter;
+pub mod socketcan_bus;
 
 pub use basic::{LoopbackHardware, SimDevice, SimKind, SimProtocol, SimWord, SineHardware};

@@ -144,6 +144,8 @@ struct PlugState {
 struct Plug {
     state: Mutex<PlugState>,
     changed: Condvar,
+    /// The simulator reads nothing from the host (its writes go on).
+    paused: AtomicBool,
 }
 
 /// What happened to the endpoint during [`Io::service`].
@@ -198,6 +200,10 @@ impl Io {
     /// Waits up to `timeout` (at most 50 ms) for input; returns what arrived.
     fn read(&mut self, buf: &mut [u8], timeout: Duration) -> usize {
         let timeout = timeout.min(Duration::from_millis(50));
+        if self.plug.paused.load(Ordering::Relaxed) {
+            std::thread::sleep(timeout.min(Duration::from_millis(1)));
+            return 0;
+        }
         let Some(ep) = &self.ep else {
             // Unplugged: nothing arrives; wake up often enough to see a replug.
             std::thread::sleep(timeout.min(Duration::from_millis(1)));
@@ -364,6 +370,13 @@ impl<S> Running<S> {
     /// Whether the endpoint is plugged in.
     pub fn is_plugged(&self) -> bool {
         lock(&self.plug.state).plugged
+    }
+
+    /// Stops (`true`) or resumes reading what the host sends, as an adapter whose receive
+    /// side hangs: the host's writes pile up in the pty (and, through the kernel's slcan
+    /// driver, in the interface's transmit queue) while answers already due still go out.
+    pub fn pause_reading(&self, paused: bool) {
+        self.plug.paused.store(paused, Ordering::Relaxed);
     }
 
     /// Unplugs the endpoint, as a USB adapter pulled out while the servos or motors behind it

@@ -8,10 +8,13 @@
 //!   packages of the interop tests (`tools/python-requirements.txt`); tests fail, never skip,
 //!   when it is missing.
 //! * [`alloc`] — a counting global allocator, to prove that a real-time path allocates nothing.
+//! * [`can_vm`] — Debian's kernel booted in QEMU with the host's file system shared, for tests
+//!   that need a real Linux CAN stack (vcan, slcan) the build machine's kernel lacks.
 
 use std::path::PathBuf;
 
 pub mod alloc;
+pub mod can_vm;
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
