@@ -290,9 +290,11 @@ impl BridgeConfig {
         if defaults {
             // Redial a lost peer quickly: a link back after a cut carries states again within
             // a second.
-            set(&mut c, "connect/retry/period_init_ms", "100".into())?;
-            set(&mut c, "connect/retry/period_max_ms", "500".into())?;
-            set(&mut c, "connect/retry/period_increase_factor", "2".into())?;
+            set(
+                &mut c,
+                "connect/retry",
+                "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 2}".into(),
+            )?;
         }
         Ok(c)
     }

@@ -43,8 +43,10 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
     let opts = LaunchOptions {
         executor: exe.clone(),
         executor_args: vec!["__executor".into()],
-        gateway: exe,
+        gateway: exe.clone(),
         gateway_args: vec!["__score-gateway".into()],
+        bridge: exe,
+        bridge_args: vec!["bridge".into()],
         domain: domain.map(str::to_string),
         only: a.only.clone(),
         no_rt: a.no_rt,

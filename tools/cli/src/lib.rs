@@ -6,6 +6,7 @@
 //! * inspection: [`list`], [`get_set`] (`get`, `set`), [`echo`], [`top`];
 //! * logging: [`record`] and [`replay`] over the MCAP layout in [`recording`], and [`plot`];
 //! * the thesis' external interface: [`udp`] (`udp-gateway`);
+//! * other hosts: [`bridge`] (`bridge`, over `conductor_bridge`);
 //! * the benchmark suite: [`bench`] (`bench`, over `conductor_benches::suite`).
 //!
 //! Long-running commands stop cleanly on Ctrl-C/SIGTERM ([`stop`]).
@@ -13,6 +14,8 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod bench_bridge;
+pub mod bridge;
 pub mod cli;
 pub mod echo;
 pub mod error;
@@ -68,7 +71,9 @@ pub fn run(cli: Cli) -> Result<()> {
              the process's signals)"
                 .into(),
         )),
+        Command::Bench(a) if a.bridge => bench::run_bridge(a),
         Command::Bench(a) => bench::run(a),
+        Command::BridgeBench { args } => bench_bridge::helper(args),
         Command::List(a) => list::run(&bus("list")?, a).map(drop),
         Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
         Command::Set(a) => get_set::set(&bus("set")?, a),
@@ -91,6 +96,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::UdpGateway(a) => {
             install_stop()?;
             udp::run(&bus("udp-gateway")?, a).map(drop)
+        }
+        Command::Bridge(a) => {
+            install_stop()?;
+            bridge::run(cli.domain.as_deref(), a)
         }
         Command::Plot(a) => plot::run(a).map(drop),
         Command::Completions { shell } => {
