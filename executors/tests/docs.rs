@@ -5,7 +5,8 @@
 use conductor_devices::kinds::KINDS;
 use conductor_executor::manifest::reference::kinds_markdown;
 use conductor_executor::manifest::{
-    BRIDGE_KEYS, DEVICE_KEYS, GATEWAY_KEYS, HARDWARE_KEYS, PROTOCOL_KEYS, STATE_KEYS, SUBSYSTEM_KEYS, TOP_KEYS,
+    BRIDGE_KEYS, DEVICE_KEYS, GATEWAY_KEYS, HARDWARE_KEYS, PROTOCOL_KEYS, STATE_KEYS,
+    SUBSYSTEM_KEYS, TOP_KEYS,
 };
 
 const BEGIN: &str = "<!-- kinds:begin -->\n";

@@ -343,7 +343,10 @@ impl Supervisor {
         };
         match &c.role {
             Role::Gateway(g) if g.kind == GatewayKind::Bridge => {
-                note!("conductor: bridge started (pid {pid}) for {}", g.port.display())
+                note!(
+                    "conductor: bridge started (pid {pid}) for {}",
+                    g.port.display()
+                )
             }
             Role::Gateway(g) => note!(
                 "conductor: gateway {} started (pid {pid}), waiting for its board on {}",

@@ -167,7 +167,8 @@ impl BridgeConfig {
             bridge: Option<BridgeConfig>,
         }
         // Everything else in the manifest is the executors' business (and validated there).
-        let doc: toml::Table = toml::from_str(text).map_err(|e| BridgeError::Config(e.to_string()))?;
+        let doc: toml::Table =
+            toml::from_str(text).map_err(|e| BridgeError::Config(e.to_string()))?;
         let Some(b) = doc.get("bridge") else {
             return Ok(None);
         };
@@ -212,7 +213,8 @@ impl BridgeConfig {
             }
         }
         for i in &self.import {
-            conductor_bus::Domain::new(&i.domain).map_err(|e| BridgeError::Config(e.to_string()))?;
+            conductor_bus::Domain::new(&i.domain)
+                .map_err(|e| BridgeError::Config(e.to_string()))?;
             Selector::many(&i.states)?;
             if !i.prefix.is_empty() {
                 conductor_bus::naming::validate("subsystem", &format!("{}x", i.prefix))
@@ -331,7 +333,10 @@ domain = "ws"
         for (text, says) in [
             ("host = \"a/b\"\n[export]\nstates=[\"*\"]", "host"),
             ("[export]\nstates=[\"*\"]\nrate_hz = -1", "rate_hz"),
-            ("[zenoh]\nmode = \"router\"\n[export]\nstates=[\"*\"]", "zenohd"),
+            (
+                "[zenoh]\nmode = \"router\"\n[export]\nstates=[\"*\"]",
+                "zenohd",
+            ),
             ("heartbeat_ms = 50", "nothing to do"),
             ("[export]\nstate=[\"*\"]", "unknown field"),
         ] {

@@ -360,7 +360,11 @@ impl Exporter {
         }
         if !refused.is_empty() {
             let n = refused.len() as u64;
-            let total = self.counters.setpoints_refused.fetch_add(n, std::sync::atomic::Ordering::Relaxed) + n;
+            let total = self
+                .counters
+                .setpoints_refused
+                .fetch_add(n, std::sync::atomic::Ordering::Relaxed)
+                + n;
             if let Some(held) = self.warn_refused.allow() {
                 warn!(
                     "refused {n} setpoint(s) from {} for {sub} (indices {refused:?}): not exported \

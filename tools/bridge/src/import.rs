@@ -113,7 +113,13 @@ pub(crate) struct Importer {
     warn_commands: RateLimit,
 }
 
-fn enqueue(tx: &SyncSender<Inbound>, counters: &Counters, rule: usize, what: What, s: &zenoh::sample::Sample) {
+fn enqueue(
+    tx: &SyncSender<Inbound>,
+    counters: &Counters,
+    rule: usize,
+    what: What,
+    s: &zenoh::sample::Sample,
+) {
     let m = Inbound {
         rule,
         what,
@@ -262,8 +268,11 @@ impl Importer {
                     self.mark_live(i);
                 }
                 let r = &self.remotes[i];
-                (r.session != hb.session || r.catalog_version != hb.catalog_version || !r.has_catalog)
-                    && r.last_query.is_none_or(|t| now.duration_since(t) > Duration::from_millis(200))
+                (r.session != hb.session
+                    || r.catalog_version != hb.catalog_version
+                    || !r.has_catalog)
+                    && r.last_query
+                        .is_none_or(|t| now.duration_since(t) > Duration::from_millis(200))
             }
             None => true,
         };
@@ -291,7 +300,8 @@ impl Importer {
         let i = match self.remote(rule, &c.host) {
             Some(i) => i,
             None => {
-                let bus = match Bus::open(&self.domain, &format!("{MIRROR_NODE_PREFIX}{}", c.host)) {
+                let bus = match Bus::open(&self.domain, &format!("{MIRROR_NODE_PREFIX}{}", c.host))
+                {
                     Ok(b) => b,
                     Err(e) => {
                         warn!("cannot join the local domain for host {}: {e}", c.host);
@@ -327,7 +337,11 @@ impl Importer {
         let rule = &self.rules[rule];
         // Group what this rule imports by subsystem, in the owner's index order.
         let mut by_sub: Vec<(String, Vec<CatalogEntry>)> = Vec::new();
-        for e in c.states.iter().filter(|e| any_matches(&rule.states, &e.subsystem, &e.state)) {
+        for e in c
+            .states
+            .iter()
+            .filter(|e| any_matches(&rule.states, &e.subsystem, &e.state))
+        {
             match by_sub.iter_mut().find(|(s, _)| *s == e.subsystem) {
                 Some((_, v)) => v.push(e.clone()),
                 None => by_sub.push((e.subsystem.clone(), vec![e.clone()])),
@@ -350,18 +364,27 @@ impl Importer {
             let name = format!("{}{sub}", rule.prefix);
             if let Some(m) = old
                 .iter_mut()
-                .find(|m| m.as_ref().is_some_and(|m| m.owner_sub == sub && m.entries == entries))
+                .find(|m| {
+                    m.as_ref()
+                        .is_some_and(|m| m.owner_sub == sub && m.entries == entries)
+                })
                 .and_then(Option::take)
             {
                 kept.push(m);
                 continue;
             }
             // Drop our previous mirror of it first, so its services can be re-created.
-            if let Some(slot) = old.iter_mut().find(|m| m.as_ref().is_some_and(|m| m.owner_sub == sub)) {
+            if let Some(slot) = old
+                .iter_mut()
+                .find(|m| m.as_ref().is_some_and(|m| m.owner_sub == sub))
+            {
                 *slot = None;
             }
             if local.iter().any(|(s, writers)| {
-                *s == name && !writers.iter().any(|w| w == &format!("{MIRROR_NODE_PREFIX}{}", r.host))
+                *s == name
+                    && !writers
+                        .iter()
+                        .any(|w| w == &format!("{MIRROR_NODE_PREFIX}{}", r.host))
             }) {
                 warn!(
                     "not importing {sub} from {}: subsystem {name:?} already exists in domain {:?} \
@@ -389,7 +412,8 @@ impl Importer {
         r.index.clear();
         for (mi, m) in r.mirrors.iter().enumerate() {
             for (si, e) in m.entries.iter().enumerate() {
-                r.index.insert((m.owner_sub.clone(), e.state.clone()), (mi, si));
+                r.index
+                    .insert((m.owner_sub.clone(), e.state.clone()), (mi, si));
             }
         }
         self.mark_live(i);
@@ -416,7 +440,12 @@ impl Importer {
         };
         let r = &mut self.remotes[i];
         if r.session != env.session {
-            return self.unknown(&env.host, sub, state, "from another session than its catalog");
+            return self.unknown(
+                &env.host,
+                sub,
+                state,
+                "from another session than its catalog",
+            );
         }
         let Some(&(mi, si)) = r.index.get(&(sub.to_string(), state.to_string())) else {
             // Exported but not imported by this rule, or not in the host's catalog.
@@ -517,7 +546,10 @@ impl Importer {
             seq: self.cmd_seq,
         };
         let key = wire::command_key(&self.rules[r.rule].domain, &m.owner_sub);
-        match self.out.try_send((key, wire::encode_frame(&out), env.encode())) {
+        match self
+            .out
+            .try_send((key, wire::encode_frame(&out), env.encode()))
+        {
             Ok(()) => {}
             Err(_) => {
                 let n = Counters::bump(&self.counters.commands_dropped);
@@ -564,14 +596,20 @@ impl Importer {
     }
 }
 
-fn make_mirror(bus: &Bus, owner_sub: &str, name: &str, entries: Vec<CatalogEntry>) -> Result<Mirror> {
+fn make_mirror(
+    bus: &Bus,
+    owner_sub: &str,
+    name: &str,
+    entries: Vec<CatalogEntry>,
+) -> Result<Mirror> {
     let specs: Vec<StateSpec> = entries
         .iter()
         .enumerate()
         .map(|(i, e)| StateSpec::new(e.state.clone(), e.meta(i as u32)))
         .collect();
-    let publisher = StatePublisher::create(bus, name, &specs)?;
+    // Commands first: once a mirror state is visible, a controller can command it.
     let commands = CommandReceiver::create(bus, name)?;
+    let publisher = StatePublisher::create(bus, name, &specs)?;
     let states = entries
         .iter()
         .map(|e| MirrorState {

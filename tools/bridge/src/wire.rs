@@ -37,7 +37,9 @@ pub enum Malformed {
         expected: usize,
     },
     /// No envelope, or not a Conductor bridge envelope.
-    #[error("no Conductor bridge envelope (attachment missing or not starting with \"cdrb\\x01\")")]
+    #[error(
+        "no Conductor bridge envelope (attachment missing or not starting with \"cdrb\\x01\")"
+    )]
     Envelope,
     /// Envelope host name empty, too long or not `[A-Za-z0-9_.-]`.
     #[error("bad host name in the envelope")]
@@ -291,7 +293,8 @@ pub struct Catalog {
 impl Catalog {
     /// Parses and checks a catalog.
     pub fn decode(b: &[u8]) -> Result<Self, Malformed> {
-        let c: Catalog = serde_json::from_slice(b).map_err(|e| Malformed::Catalog(e.to_string()))?;
+        let c: Catalog =
+            serde_json::from_slice(b).map_err(|e| Malformed::Catalog(e.to_string()))?;
         if !valid_host(&c.host) {
             return Err(Malformed::Host);
         }

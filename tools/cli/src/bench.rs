@@ -88,7 +88,8 @@ pub fn run_bridge(a: &BenchArgs) -> Result<()> {
     let r = crate::bench_bridge::run(&o)?;
     let md = r.markdown();
     println!("{md}");
-    std::fs::create_dir_all(&a.out).map_err(|e| CliError::os("creating the output directory", e))?;
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| CliError::os("creating the output directory", e))?;
     std::fs::write(a.out.join("bridge.md"), &md)
         .and_then(|()| {
             std::fs::write(
@@ -97,7 +98,10 @@ pub fn run_bridge(a: &BenchArgs) -> Result<()> {
             )
         })
         .map_err(|e| CliError::os("writing the bridge report", e))?;
-    eprintln!("bench: wrote {0}/bridge.md and {0}/bridge.json", a.out.display());
+    eprintln!(
+        "bench: wrote {0}/bridge.md and {0}/bridge.json",
+        a.out.display()
+    );
     Ok(())
 }
 

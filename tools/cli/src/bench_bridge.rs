@@ -60,7 +60,10 @@ impl Netns {
     fn make() -> std::result::Result<Self, String> {
         let pid = std::process::id();
         let ns = [format!("cdr-bba-{pid}"), format!("cdr-bbb-{pid}")];
-        let veth = [format!("cbba{}", pid % 100_000), format!("cbbb{}", pid % 100_000)];
+        let veth = [
+            format!("cbba{}", pid % 100_000),
+            format!("cbbb{}", pid % 100_000),
+        ];
         let net = 1 + pid % 250;
         let addr = [format!("10.214.{net}.1"), format!("10.214.{net}.2")];
         let me = Netns {
@@ -79,10 +82,20 @@ impl Netns {
         };
         ip(&["netns", "add", &ns[0]])?;
         ip(&["netns", "add", &ns[1]])?;
-        ip(&["link", "add", &veth[0], "type", "veth", "peer", "name", &veth[1]])?;
+        ip(&[
+            "link", "add", &veth[0], "type", "veth", "peer", "name", &veth[1],
+        ])?;
         for i in 0..2 {
             ip(&["link", "set", &veth[i], "netns", &ns[i]])?;
-            ip(&["-n", &ns[i], "addr", "add", &format!("{}/30", addr[i]), "dev", &veth[i]])?;
+            ip(&[
+                "-n",
+                &ns[i],
+                "addr",
+                "add",
+                &format!("{}/30", addr[i]),
+                "dev",
+                &veth[i],
+            ])?;
             ip(&["-n", &ns[i], "link", "set", &veth[i], "up"])?;
             ip(&["-n", &ns[i], "link", "set", "lo", "up"])?;
         }
@@ -146,7 +159,10 @@ impl Helper {
         let (tx, lines) = std::sync::mpsc::channel();
         let out = child.stdout.take().expect("piped");
         std::thread::spawn(move || {
-            for l in BufReader::new(out).lines().map_while(std::result::Result::ok) {
+            for l in BufReader::new(out)
+                .lines()
+                .map_while(std::result::Result::ok)
+            {
                 let _ = tx.send(l);
             }
         });
@@ -275,7 +291,10 @@ fn wait_listed(bus: &Bus, name: &str) -> Result<()> {
     let end = Instant::now() + Duration::from_secs(30);
     while bus.resolve(name).is_err() {
         if Instant::now() > end {
-            return Err(err(format!("{name} never appeared in domain {}", bus.domain().name())));
+            return Err(err(format!(
+                "{name} never appeared in domain {}",
+                bus.domain().name()
+            )));
         }
         std::thread::sleep(Duration::from_millis(50));
     }
@@ -382,7 +401,10 @@ pub fn run(o: &Options) -> Result<Report> {
         .arg("--endpoint")
         .arg(sides.endpoint(1));
     let publ = Helper::spawn(publ)?;
-    let line = sub.line("latency", Duration::from_secs_f64(60.0 + 3.0 * n as f64 / o.latency_hz))?;
+    let line = sub.line(
+        "latency",
+        Duration::from_secs_f64(60.0 + 3.0 * n as f64 / o.latency_hz),
+    )?;
     publ.stop();
     sub.stop();
     let nums: Vec<f64> = line
@@ -488,7 +510,10 @@ pub fn run(o: &Options) -> Result<Report> {
     std::thread::sleep(Duration::from_millis(500));
     for s in &mut subs {
         while let Some(x) = s.receive()? {
-            if x.tick > first_tick && x.tick <= total_ticks && x.status & conductor_bus::status::STALE == 0 {
+            if x.tick > first_tick
+                && x.tick <= total_ticks
+                && x.status & conductor_bus::status::STALE == 0
+            {
                 received += 1;
             }
         }
@@ -510,7 +535,10 @@ pub fn run(o: &Options) -> Result<Report> {
 
 /// `conductor __bridge-bench zpub|zsub`: raw Zenoh pub/sub of a sample-sized payload.
 pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
-    let a: Vec<String> = args.iter().map(|s| s.to_string_lossy().into_owned()).collect();
+    let a: Vec<String> = args
+        .iter()
+        .map(|s| s.to_string_lossy().into_owned())
+        .collect();
     let get = |k: &str| {
         a.iter()
             .position(|x| x == k)
@@ -559,7 +587,12 @@ pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
                     Err(_) => break,
                 }
             }
-            println!("latency {} {} {}", percentile(&mut v, 0.5), percentile(&mut v, 0.99), v.len());
+            println!(
+                "latency {} {} {}",
+                percentile(&mut v, 0.5),
+                percentile(&mut v, 0.99),
+                v.len()
+            );
             let _ = z.close().wait();
             Ok(())
         }

@@ -174,7 +174,10 @@ impl Link {
     fn netns() -> Result<Self, String> {
         let pid = std::process::id();
         let ns = [format!("cdr-bra-{pid}"), format!("cdr-brb-{pid}")];
-        let veth = [format!("cbra{}", pid % 100_000), format!("cbrb{}", pid % 100_000)];
+        let veth = [
+            format!("cbra{}", pid % 100_000),
+            format!("cbrb{}", pid % 100_000),
+        ];
         let net = 1 + pid % 250;
         let addr = [format!("10.213.{net}.1"), format!("10.213.{net}.2")];
         let link = Link::Netns {
@@ -184,10 +187,20 @@ impl Link {
         };
         ip(&["netns", "add", &ns[0]])?;
         ip(&["netns", "add", &ns[1]])?;
-        ip(&["link", "add", &veth[0], "type", "veth", "peer", "name", &veth[1]])?;
+        ip(&[
+            "link", "add", &veth[0], "type", "veth", "peer", "name", &veth[1],
+        ])?;
         for i in 0..2 {
             ip(&["link", "set", &veth[i], "netns", &ns[i]])?;
-            ip(&["-n", &ns[i], "addr", "add", &format!("{}/30", addr[i]), "dev", &veth[i]])?;
+            ip(&[
+                "-n",
+                &ns[i],
+                "addr",
+                "add",
+                &format!("{}/30", addr[i]),
+                "dev",
+                &veth[i],
+            ])?;
             ip(&["-n", &ns[i], "link", "set", &veth[i], "up"])?;
             ip(&["-n", &ns[i], "link", "set", "lo", "up"])?;
         }
@@ -282,7 +295,11 @@ fn wait_sample(
 fn wait_listed(bus: &Bus, name: &str, timeout: Duration) {
     let end = Instant::now() + timeout;
     while bus.resolve(name).is_err() {
-        assert!(Instant::now() < end, "{name} never appeared in {:?}", bus.domain().name());
+        assert!(
+            Instant::now() < end,
+            "{name} never appeared in {:?}",
+            bus.domain().name()
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
 }
@@ -341,7 +358,11 @@ fn counter(summary: &str, name: &str) -> u64 {
     panic!("no {name} in {line}");
 }
 
+/// The scenarios run one at a time: their timing bounds assume the machine is not running two.
+static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
+
 fn scenario(link: Link, tag: &str, inject: bool) {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let a = Domain::unique(&format!("{tag}a")).unwrap();
     let b = Domain::unique(&format!("{tag}b")).unwrap();
     let dir = tempdir(tag);
@@ -371,7 +392,10 @@ fn scenario(link: Link, tag: &str, inject: bool) {
         "--heartbeat-ms",
         &hb,
     ]));
-    exporter.wait_line("ready bridge hosta: exporting 2 state(s)", Duration::from_secs(30));
+    exporter.wait_line(
+        "ready bridge hosta: exporting 2 state(s)",
+        Duration::from_secs(30),
+    );
     let importer = Proc::spawn(link.conductor(1, &b).args([
         "bridge",
         "--host",
@@ -399,7 +423,19 @@ fn scenario(link: Link, tag: &str, inject: bool) {
             .collect()
     };
     let knee = row("leg/knee");
-    assert_eq!(knee[1..8], ["rad", "200", "rw", "[-1,1]", "dknee", "hosta", "bridge@hosta"], "{list}");
+    assert_eq!(
+        knee[1..8],
+        [
+            "rad",
+            "200",
+            "rw",
+            "[-1,1]",
+            "dknee",
+            "hosta",
+            "bridge@hosta"
+        ],
+        "{list}"
+    );
     // hip is exported but not declared for remote commands: read-only on this side.
     assert_eq!(row("leg/hip")[3], "ro", "{list}");
 
@@ -409,8 +445,18 @@ fn scenario(link: Link, tag: &str, inject: bool) {
 
     // A command through the mirror reaches the owner and comes back.
     ok(conductor(&b).args(["set", "leg/knee", "0.5"]));
-    wait_sample(&mut a_knee, Duration::from_secs(5), "knee = 0.5 at the owner", |s| s.value == 0.5);
-    wait_sample(&mut b_knee, Duration::from_secs(5), "knee = 0.5 mirrored", |s| s.value == 0.5);
+    wait_sample(
+        &mut a_knee,
+        Duration::from_secs(5),
+        "knee = 0.5 at the owner",
+        |s| s.value == 0.5,
+    );
+    wait_sample(
+        &mut b_knee,
+        Duration::from_secs(5),
+        "knee = 0.5 mirrored",
+        |s| s.value == 0.5,
+    );
 
     // Out of limits: the owner clamps, and the flag comes back to the sender's side.
     let mut ctl = Controller::new(&bus_b);
@@ -418,20 +464,29 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     ctl.send_ctrl().unwrap();
     // (The flag comes with the tick that applied the frame; the clamped value reads back a bus
     // cycle later.)
-    wait_sample(&mut b_knee, Duration::from_secs(5), "CLAMPED mirrored", |s| {
-        s.status & status::CLAMPED != 0
-    });
-    wait_sample(&mut b_knee, Duration::from_secs(5), "knee clamped to 1", |s| {
-        s.status & status::CLAMPED != 0 && s.value == 1.0
-    });
+    wait_sample(
+        &mut b_knee,
+        Duration::from_secs(5),
+        "CLAMPED mirrored",
+        |s| s.status & status::CLAMPED != 0,
+    );
+    wait_sample(
+        &mut b_knee,
+        Duration::from_secs(5),
+        "knee clamped to 1",
+        |s| s.status & status::CLAMPED != 0 && s.value == 1.0,
+    );
     // NaN (sent raw: the Controller refuses it before it leaves): the owner rejects it.
     let mut raw = CommandSender::open(&bus_b, "leg").unwrap();
     let mut f = CommandFrame::default();
     f.push(0, f64::NAN);
     raw.send(&f).unwrap();
-    wait_sample(&mut b_knee, Duration::from_secs(5), "REJECTED mirrored", |s| {
-        s.status & status::REJECTED != 0
-    });
+    wait_sample(
+        &mut b_knee,
+        Duration::from_secs(5),
+        "REJECTED mirrored",
+        |s| s.status & status::REJECTED != 0,
+    );
     // A state not declared for remote commands: refused on this side, and a raw frame for it
     // never reaches the owner.
     assert!(ctl.add_ctrl("leg/hip", 0.3).is_err());
@@ -473,7 +528,8 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     if inject {
         let mut cfg = zenoh::Config::default();
         cfg.insert_json5("mode", "\"peer\"").unwrap();
-        cfg.insert_json5("scouting/multicast/enabled", "false").unwrap();
+        cfg.insert_json5("scouting/multicast/enabled", "false")
+            .unwrap();
         cfg.insert_json5("connect/endpoints", &format!("[\"{}\"]", link.endpoint(1)))
             .unwrap();
         let z = zenoh::open(cfg).wait().unwrap();
@@ -491,33 +547,58 @@ fn scenario(link: Link, tag: &str, inject: bool) {
                 value: 123.0,
                 ..StateSample::default()
             });
-            z.put(&key, bad.to_vec()).attachment(foreign.encode()).wait().unwrap();
+            z.put(&key, bad.to_vec())
+                .attachment(foreign.encode())
+                .wait()
+                .unwrap();
             bad[43] = 0x80; // a status bit the ABI does not define
-            z.put(&key, bad.to_vec()).attachment(foreign.encode()).wait().unwrap();
+            z.put(&key, bad.to_vec())
+                .attachment(foreign.encode())
+                .wait()
+                .unwrap();
         }
         std::thread::sleep(Duration::from_millis(300));
         z.close().wait().unwrap();
     }
 
+    // Nothing went quiet before the cut.
+    let hiccup = rec
+        .seen_b
+        .iter()
+        .find(|x| x.at >= t0 && x.s.status & status::STALE != 0);
+    assert!(
+        hiccup.is_none(),
+        "STALE before the cut; importer: {}",
+        importer.stderr.lock().unwrap()
+    );
+
     // Cut the link for 2 s.
     let t_cut = Instant::now();
     link.cut(&exporter);
     rec.until(
-        |_, b| b.iter().any(|x| x.at >= t_cut && x.s.status & status::STALE != 0),
+        |_, b| {
+            b.iter()
+                .any(|x| x.at >= t_cut && x.s.status & status::STALE != 0)
+        },
         Duration::from_secs(5),
         "mirrors marked STALE",
     );
-    let t_stale = rec.seen_b
+    let t_stale = rec
+        .seen_b
         .iter()
         .find(|x| x.at >= t_cut && x.s.status & status::STALE != 0)
         .unwrap()
         .at;
     rec.until(
-        |a, _| a.iter().any(|x| x.at >= t_cut && x.s.status & status::WATCHDOG != 0),
+        |a, _| {
+            a.iter()
+                .any(|x| x.at >= t_cut && x.s.status & status::WATCHDOG != 0)
+        },
         Duration::from_secs(5),
         "the owner's watchdog",
     );
-    let t_wd = rec.seen_a
+    let t_wd = rec
+        .seen_a
         .iter()
         .find(|x| x.at >= t_cut && x.s.status & status::WATCHDOG != 0)
         .unwrap()
@@ -531,17 +612,25 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     let t_restore = Instant::now();
     link.restore(&exporter);
     rec.until(
-        |_, b| b.iter().any(|x| x.at >= t_restore && x.s.status & status::STALE == 0),
+        |_, b| {
+            b.iter()
+                .any(|x| x.at >= t_restore && x.s.status & status::STALE == 0)
+        },
         Duration::from_secs(10),
         "flow after the restore",
     );
-    let t_resume = rec.seen_b
+    let t_resume = rec
+        .seen_b
         .iter()
         .find(|x| x.at >= t_restore && x.s.status & status::STALE == 0)
         .unwrap()
         .at;
     let t_end = Instant::now() + Duration::from_millis(500);
-    rec.until(|_, _| Instant::now() >= t_end, Duration::from_secs(5), "a last half second");
+    rec.until(
+        |_, _| Instant::now() >= t_end,
+        Duration::from_secs(5),
+        "a last half second",
+    );
     running.store(false, Ordering::Relaxed);
     ctl_thread.join().unwrap();
 
@@ -556,7 +645,10 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     );
     // Failure bounds, generous for a loaded machine: the design targets are 2 heartbeats and
     // 1 s; the figures above are what this run measured.
-    assert!(stale_ms < (2 * HEARTBEAT_MS) as f64 + 400.0, "STALE after {stale_ms} ms");
+    assert!(
+        stale_ms < (2 * HEARTBEAT_MS) as f64 + 400.0,
+        "STALE after {stale_ms} ms"
+    );
     assert!(resume_ms < 3000.0, "flow back after {resume_ms} ms");
 
     // No wrong or duplicated value: every mirrored sample is the owner's sample of that tick,
@@ -571,7 +663,11 @@ fn scenario(link: Link, tag: &str, inject: bool) {
             checked += 1;
         } else {
             // Only samples from before the recording started may be missing on A's side.
-            assert!(x.s.tick <= rec.seen_a[0].s.tick, "tick {} unknown at the owner", x.s.tick);
+            assert!(
+                x.s.tick <= rec.seen_a[0].s.tick,
+                "tick {} unknown at the owner",
+                x.s.tick
+            );
         }
         if x.s.status & status::STALE == 0 {
             assert!(x.s.tick > last_tick, "tick {} after {last_tick}", x.s.tick);
@@ -594,7 +690,10 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     if inject {
         assert!(counter(&err_b, "malformed") >= 6, "{err_b}");
         assert!(counter(&err_b, "unknown") >= 3, "{err_b}");
-        assert!(err_b.contains("dropped a malformed or foreign message"), "{err_b}");
+        assert!(
+            err_b.contains("dropped a malformed or foreign message"),
+            "{err_b}"
+        );
     }
     drop(launcher);
     let _ = std::fs::remove_dir_all(dir);
@@ -613,6 +712,7 @@ fn across_two_network_namespaces_joined_by_a_veth_pair() {
         eprintln!("SKIPPED: two network namespaces need root (ip netns); the loopback test ran the same scenario");
         return;
     }
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let link = match Link::netns() {
         Ok(l) => l,
         Err(e) => {
@@ -620,5 +720,84 @@ fn across_two_network_namespaces_joined_by_a_veth_pair() {
             return;
         }
     };
+    drop(_one);
     scenario(link, "brns", false);
+}
+
+#[test]
+fn launch_runs_and_supervises_the_bridge_of_a_manifest() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let a = Domain::unique("brla").unwrap();
+    let b = Domain::unique("brlb").unwrap();
+    let port = free_tcp_ports(1);
+    let dir = tempdir("brlaunch");
+    let m = dir.join("robot.toml");
+    std::fs::write(
+        &m,
+        format!(
+            "{}\n[bridge]\nhost = \"robot\"\n\n[bridge.zenoh]\nlisten = [\"tcp/127.0.0.1:{port}\"]\n\n\
+             [bridge.export]\nstates = [\"leg/*\"]\ncommands = [\"leg/knee\"]\n",
+            manifest()
+        ),
+    )
+    .unwrap();
+    ok(conductor(&a).arg("launch").arg(&m).arg("--check"));
+    let launcher = Proc::spawn(conductor(&a).arg("launch").arg(&m).args(["--no-rt"]));
+    let importer = Proc::spawn(conductor(&b).args([
+        "bridge",
+        "--host",
+        "ws",
+        "--connect",
+        &format!("tcp/127.0.0.1:{port}"),
+        "--import",
+        a.name(),
+    ]));
+    importer.wait_line("ready bridge ws", Duration::from_secs(30));
+    let bus_b = Bus::open(&b, "test-b").unwrap();
+    wait_listed(&bus_b, "leg/knee", Duration::from_secs(30));
+    // A setpoint from the workstation side reaches the launched executor.
+    ok(conductor(&b).args(["set", "leg/knee", "-0.5"]));
+    let bus_a = Bus::open(&a, "test-a").unwrap();
+    let mut knee = StateSubscriber::with_buffer(&bus_a, "leg/knee", 64).unwrap();
+    wait_sample(&mut knee, Duration::from_secs(5), "knee = -0.5", |s| {
+        s.value == -0.5
+    });
+
+    // The launcher supervises it: killed, it is restarted, and the mirror comes back to life.
+    let log = || launcher.stderr.lock().unwrap().clone();
+    let end = Instant::now() + Duration::from_secs(10);
+    while !log().contains("bridge ready") {
+        assert!(
+            Instant::now() < end,
+            "no 'bridge ready' from the launcher: {}",
+            log()
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let pid: i32 = log()
+        .lines()
+        .find_map(|l| l.split("bridge started (pid ").nth(1))
+        .and_then(|r| r.split(')').next())
+        .and_then(|p| p.parse().ok())
+        .unwrap_or_else(|| panic!("no bridge pid in {}", log()));
+    // SAFETY: kill(2) on the bridge the launcher (our child) started.
+    unsafe { libc::kill(pid, libc::SIGKILL) };
+    let mut mirror = StateSubscriber::with_buffer(&bus_b, "leg/knee", 64).unwrap();
+    wait_sample(
+        &mut mirror,
+        Duration::from_secs(10),
+        "STALE after the kill",
+        |s| s.status & status::STALE != 0,
+    );
+    wait_sample(
+        &mut mirror,
+        Duration::from_secs(20),
+        "fresh after the restart",
+        |s| s.status & status::STALE == 0,
+    );
+    let err_b = importer.stop();
+    assert!(err_b.contains("is back"), "{err_b}");
+    let out = launcher.stop();
+    assert!(out.contains("bridge started"), "{out}");
+    let _ = std::fs::remove_dir_all(dir);
 }
