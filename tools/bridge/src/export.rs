@@ -162,7 +162,7 @@ impl Exporter {
             {
                 continue;
             }
-            let sub = match StateSubscriber::with_buffer(&self.bus, &s.qualified_name(), 64) {
+            let sub = match StateSubscriber::from_info(&self.bus, s.clone(), 64) {
                 Ok(sub) => sub,
                 // It vanished between listing and opening: the next rescan tries again.
                 Err(_) => continue,

@@ -283,12 +283,12 @@ fn bridge(sides: &Sides, i: usize, d: &Domain, remote: &Domain, export: &str) ->
         c.args(["--import", remote.name()]);
     }
     let h = Helper::spawn(c)?;
-    h.line("ready bridge", Duration::from_secs(30))?;
+    h.line("ready bridge", Duration::from_secs(180))?;
     Ok(h)
 }
 
 fn wait_listed(bus: &Bus, name: &str) -> Result<()> {
-    let end = Instant::now() + Duration::from_secs(30);
+    let end = Instant::now() + Duration::from_secs(180);
     while bus.resolve(name).is_err() {
         if Instant::now() > end {
             return Err(err(format!(
@@ -468,8 +468,11 @@ pub fn run(o: &Options) -> Result<Report> {
     let im = bridge(&sides, 1, &b, &a, "")?;
     let bus_b = Bus::open(&b, "bench-b")?;
     wait_listed(&bus_b, &format!("load/s{}", o.states - 1))?;
-    let mut subs = (0..o.states)
-        .map(|i| StateSubscriber::with_buffer(&bus_b, &format!("load/s{i}"), 256))
+    let mut subs = bus_b
+        .list_states()?
+        .into_iter()
+        .filter(|s| s.subsystem == "load")
+        .map(|s| StateSubscriber::from_info(&bus_b, s, 256))
         .collect::<std::result::Result<Vec<_>, _>>()?;
     std::thread::sleep(Duration::from_millis(500));
     for s in &mut subs {
