@@ -62,7 +62,12 @@ fn setup() -> Result<Vec<(String, String)>> {
     let t = Instant::now();
     let python = python_venv()?;
     rust_target(THUMB)?;
-    debian_tools(&[("socat", "socat"), ("cyclictest", "rt-tests")])?;
+    // `ip` makes the network namespaces and veth pair of the bridge test (tools/cli/tests/bridge.rs).
+    debian_tools(&[
+        ("socat", "socat"),
+        ("cyclictest", "rt-tests"),
+        ("ip", "iproute2"),
+    ])?;
     npm_ci(&root().join("score/firmware/emulator"))?;
     eprintln!("xtask: setup done in {:.1} s", t.elapsed().as_secs_f64());
     Ok(vec![(
