@@ -90,8 +90,8 @@ struct Remote {
     last_query: Option<Instant>,
     stale: bool,
     mirrors: Vec<Mirror>,
-    /// `(subsystem, state)` → (mirror, state index).
-    index: HashMap<(String, String), (usize, usize)>,
+    /// subsystem → state → (mirror, state index); looked up by `&str`, no allocation per sample.
+    index: HashMap<String, HashMap<String, (usize, usize)>>,
 }
 
 /// Everything the import thread owns.
@@ -413,7 +413,9 @@ impl Importer {
         for (mi, m) in r.mirrors.iter().enumerate() {
             for (si, e) in m.entries.iter().enumerate() {
                 r.index
-                    .insert((m.owner_sub.clone(), e.state.clone()), (mi, si));
+                    .entry(m.owner_sub.clone())
+                    .or_default()
+                    .insert(e.state.clone(), (mi, si));
             }
         }
         self.mark_live(i);
@@ -447,7 +449,7 @@ impl Importer {
                 "from another session than its catalog",
             );
         }
-        let Some(&(mi, si)) = r.index.get(&(sub.to_string(), state.to_string())) else {
+        let Some(&(mi, si)) = r.index.get(sub).and_then(|m| m.get(state)) else {
             // Exported but not imported by this rule, or not in the host's catalog.
             Counters::bump(&self.counters.unknown);
             return Ok(());
