@@ -346,6 +346,22 @@ domain = "ws"
     }
 
     #[test]
+    fn the_two_host_example_parses() {
+        let ws = BridgeConfig::from_toml(include_str!("../../../deploy/two-host/workstation.toml"))
+            .unwrap();
+        assert_eq!(ws.import[0].domain, "robot");
+        let robot =
+            BridgeConfig::from_manifest(include_str!("../../../deploy/two-host/robot.toml"))
+                .unwrap()
+                .unwrap();
+        assert_eq!(
+            robot.export.as_ref().unwrap().commands,
+            vec!["leg/knee".to_string()]
+        );
+        robot.zenoh_config().unwrap();
+    }
+
+    #[test]
     fn the_manifest_table_is_read_alone() {
         let m = r#"
 system = "x"
