@@ -239,3 +239,46 @@ fn open_outbox(bus: &Bus, subsystem: &str) -> Result<Outbox> {
         _service: service,
     })
 }
+
+/// Sends whole [`CommandFrame`]s, as built elsewhere, to one subsystem's executor: the path a
+/// bridge uses to hand a remote controller's frame to the owner, which then checks it like any
+/// local frame. `seq` and `t_send_ns` are stamped here, in this process's sequence and clock.
+pub struct CommandSender {
+    outbox: Outbox,
+}
+
+impl core::fmt::Debug for CommandSender {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("CommandSender")
+            .field("subsystem", &self.outbox.subsystem)
+            .finish()
+    }
+}
+
+impl CommandSender {
+    /// Opens `conductor/<subsystem>/commands` (the executor must have created it).
+    pub fn open(bus: &Bus, subsystem: &str) -> Result<Self> {
+        Ok(Self {
+            outbox: open_outbox(bus, subsystem)?,
+        })
+    }
+
+    /// Sends the first `count` setpoints of `frame` as one frame.
+    pub fn send(&mut self, frame: &CommandFrame) -> Result<()> {
+        let ob = &mut self.outbox;
+        ob.seq += 1;
+        ob.frame = *frame;
+        ob.frame.count = ob.frame.count.min(MAX_SETPOINTS as u32);
+        ob.frame.seq = ob.seq;
+        ob.frame.t_send_ns = monotonic_ns();
+        let sample = ob
+            .port
+            .loan_uninit()
+            .map_err(|e| BusError::iox("loaning a command frame", e))?;
+        sample
+            .write_payload(ob.frame)
+            .send()
+            .map_err(|e| BusError::iox("sending a command frame", e))?;
+        Ok(())
+    }
+}

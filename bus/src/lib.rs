@@ -28,7 +28,7 @@ pub use abi::{
 };
 pub use bus::Bus;
 pub use clock::monotonic_ns;
-pub use controller::{Controller, SURFACE_HISTORY};
+pub use controller::{CommandSender, Controller, SURFACE_HISTORY};
 pub use discovery::StateInfo;
 pub use domain::Domain;
 pub use error::{BusError, Result};

@@ -48,7 +48,12 @@ impl StateSubscriber {
 
     /// Subscribes with a queue of up to `buffer` samples (capped at the service's maximum).
     pub fn with_buffer(bus: &Bus, name: &str, buffer: usize) -> Result<Self> {
-        let info = bus.resolve(name)?;
+        Self::from_info(bus, bus.resolve(name)?, buffer)
+    }
+
+    /// Subscribes to a state discovery already found (no second look-up: what a process that
+    /// subscribes to many states at once, like a bridge, wants).
+    pub fn from_info(bus: &Bus, info: StateInfo, buffer: usize) -> Result<Self> {
         let service_name = info.service_name();
         let service = bus
             .node()

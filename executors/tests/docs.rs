@@ -5,8 +5,8 @@
 use conductor_devices::kinds::KINDS;
 use conductor_executor::manifest::reference::kinds_markdown;
 use conductor_executor::manifest::{
-    DEVICE_KEYS, GATEWAY_KEYS, HARDWARE_KEYS, PROTOCOL_KEYS, STATE_KEYS, SUBSYSTEM_KEYS, TOP_KEYS,
-    VIEW_KEYS,
+    BRIDGE_KEYS, DEVICE_KEYS, GATEWAY_KEYS, HARDWARE_KEYS, PROTOCOL_KEYS, STATE_KEYS,
+    SUBSYSTEM_KEYS, TOP_KEYS, VIEW_KEYS,
 };
 
 const BEGIN: &str = "<!-- kinds:begin -->\n";
@@ -58,6 +58,7 @@ fn every_manifest_key_is_documented() {
         .chain(STATE_KEYS)
         .chain(GATEWAY_KEYS)
         .chain(VIEW_KEYS)
+        .chain(BRIDGE_KEYS)
     {
         let documented =
             doc.contains(&format!("| `{key}` |")) || doc.contains(&format!("`{key}`, "));

@@ -26,7 +26,9 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crate::cleanup::{executor_node_name, gateway_node_name, scan_and_clean};
-use crate::manifest::{GatewayDef, Manifest, ManifestError, ViewDef};
+use crate::manifest::{
+    GatewayDef, GatewayKind, Manifest, ManifestError, ViewDef, BRIDGE_NAME,
+};
 use crate::process::resolve_domain;
 use crate::signals::{self, Stop};
 use supervisor::Supervisor;
@@ -48,6 +50,10 @@ pub struct LaunchOptions {
     /// Arguments put before the view's own `--domain`, `--listen`, `--clamp` (the `view`
     /// sub-command).
     pub view_args: Vec<OsString>,
+    /// The program run for a manifest's `[bridge]` table (`conductor`, with `bridge_args`).
+    pub bridge: PathBuf,
+    /// Arguments put before the bridge's own (`bridge`: the sub-command).
+    pub bridge_args: Vec<OsString>,
     /// Bus domain (default: the manifest's, else `CONDUCTOR_DOMAIN`, else "default").
     pub domain: Option<String>,
     /// Only these subsystems (empty: all).
@@ -84,6 +90,8 @@ impl Default for LaunchOptions {
             gateway_args: Vec::new(),
             view: beside_me("conductor"),
             view_args: vec!["view".into()],
+            bridge: beside_me("conductor"),
+            bridge_args: vec!["bridge".into()],
             domain: None,
             only: Vec::new(),
             no_rt: false,
@@ -335,6 +343,7 @@ impl Launch {
             .iter()
             .map(|s| s.name.as_str())
             .chain(manifest.gateways.iter().map(|g| g.name.as_str()))
+            .chain(manifest.bridge.as_ref().map(|_| BRIDGE_NAME))
             .collect();
         for o in &opts.only {
             if !known.contains(&o.as_str()) {
@@ -351,12 +360,27 @@ impl Launch {
             .filter(|s| wanted(&s.name))
             .map(|s| s.name.clone())
             .collect();
-        let gateways: Vec<GatewayDef> = manifest
+        let mut gateways: Vec<GatewayDef> = manifest
             .gateways
             .iter()
             .filter(|g| wanted(&g.name))
             .cloned()
             .collect();
+        // The bridge is supervised like a gateway whose "board" is the manifest it reads.
+        if manifest.bridge.is_some() && wanted(BRIDGE_NAME) {
+            gateways.push(GatewayDef {
+                name: BRIDGE_NAME.into(),
+                kind: GatewayKind::Bridge,
+                port: manifest_path
+                    .canonicalize()
+                    .unwrap_or_else(|_| manifest_path.to_path_buf()),
+                max_rate_hz: None,
+                lazy_rate_hz: None,
+                restore: false,
+                retry_ms: None,
+                watchdog_ms: None,
+            });
+        }
 
         // Nothing of a previous run may be in the way.
         let scan = scan_and_clean(&domain).map_err(LaunchError::Bus)?;

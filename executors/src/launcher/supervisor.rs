@@ -165,6 +165,20 @@ pub(super) fn gateway_args(g: &GatewayDef, domain: &str) -> Vec<OsString> {
             }
             a
         }
+        GatewayKind::Bridge => vec![
+            "--manifest".into(),
+            g.port.clone().into(),
+            "--domain".into(),
+            domain.into(),
+        ],
+    }
+}
+
+/// The program (and its leading arguments) that runs gateway `g`.
+fn gateway_program<'a>(opts: &'a LaunchOptions, g: &GatewayDef) -> (&'a PathBuf, &'a [OsString]) {
+    match g.kind {
+        GatewayKind::Score => (&opts.gateway, &opts.gateway_args),
+        GatewayKind::Bridge => (&opts.bridge, &opts.bridge_args),
     }
 }
 
@@ -280,9 +294,9 @@ impl Supervisor {
                 cmd
             }
             Role::Gateway(g) => {
-                let mut cmd = Command::new(&self.opts.gateway);
-                cmd.args(&self.opts.gateway_args)
-                    .args(gateway_args(g, self.domain.name()));
+                let (program, args) = gateway_program(&self.opts, g);
+                let mut cmd = Command::new(program);
+                cmd.args(args).args(gateway_args(g, self.domain.name()));
                 cmd
             }
             Role::View(v) => {
@@ -325,9 +339,9 @@ impl Supervisor {
                 program: self.opts.executor.clone(),
                 source,
             },
-            Role::Gateway(_) => LaunchError::SpawnGateway {
+            Role::Gateway(g) => LaunchError::SpawnGateway {
                 gateway: c.subsystem.clone(),
-                program: self.opts.gateway.clone(),
+                program: gateway_program(&self.opts, g).0.clone(),
                 source,
             },
             Role::View(_) => LaunchError::SpawnView {
@@ -374,12 +388,19 @@ impl Supervisor {
         c.phase = Phase::Starting {
             since: Instant::now(),
         };
-        if let Role::Gateway(g) = &c.role {
-            note!(
+        match &c.role {
+            Role::Gateway(g) if g.kind == GatewayKind::Bridge => {
+                note!(
+                    "conductor: bridge started (pid {pid}) for {}",
+                    g.port.display()
+                )
+            }
+            Role::Gateway(g) => note!(
                 "conductor: gateway {} started (pid {pid}), waiting for its board on {}",
                 c.subsystem,
                 g.port.display()
-            );
+            ),
+            Role::Executor => {}
         }
         self.set_info(i, Some(pid), false);
         Ok(())
@@ -433,6 +454,9 @@ impl Supervisor {
                         match &c.role {
                             Role::Executor => {
                                 note!("conductor: subsystem {} ready (pid {pid})", c.subsystem)
+                            }
+                            Role::Gateway(g) if g.kind == GatewayKind::Bridge => {
+                                note!("conductor: bridge ready (pid {pid}): {what}")
                             }
                             Role::Gateway(g) => note!(
                                 "conductor: gateway {} ready (pid {pid}): {what} from {}",

@@ -79,8 +79,18 @@ pub const GATEWAY_KEYS: &[&str] = &[
 ];
 /// Keys of the `[view]` table.
 pub const VIEW_KEYS: &[&str] = &["listen", "clamp"];
+/// Keys of the `[bridge]` table (its contents are checked by `conductor bridge` itself, which
+/// the launcher runs with the manifest).
+pub const BRIDGE_KEYS: &[&str] = &["host", "heartbeat_ms", "zenoh", "export", "import"];
 /// Top-level keys.
-pub const TOP_KEYS: &[&str] = &["system", "domain", "subsystems", "gateways", "view"];
+pub const TOP_KEYS: &[&str] = &[
+    "system",
+    "domain",
+    "subsystems",
+    "gateways",
+    "view",
+    "bridge",
+];
 
 /// Highest base rate a subsystem may ask for (Hz).
 pub const MAX_RATE_HZ: f64 = 100_000.0;
@@ -145,6 +155,8 @@ pub struct Manifest {
     pub gateways: Vec<GatewayDef>,
     /// The live view (`[view]`), run as one more supervised process when present.
     pub view: Option<ViewDef>,
+    /// The `[bridge]` table, if any: `conductor launch` runs `conductor bridge --manifest` on it.
+    pub bridge: Option<BridgeDef>,
     /// What validation found doubtful but not wrong (a bus loaded above 80 %, an actuator
     /// nothing can command, ...), in document order; see [`Manifest::render_warnings`].
     pub warnings: Vec<Diagnostic>,
@@ -155,6 +167,9 @@ pub struct Manifest {
 pub enum GatewayKind {
     /// `score-gateway`: a Score board (score/firmware) on its binary USB link.
     Score,
+    /// `conductor bridge` for the manifest's `[bridge]` table (not a `[gateways]` kind: the
+    /// launcher supervises the bridge as it does a gateway; its `port` is the manifest).
+    Bridge,
 }
 
 impl GatewayKind {
@@ -165,6 +180,7 @@ impl GatewayKind {
     pub fn name(self) -> &'static str {
         match self {
             GatewayKind::Score => "score",
+            GatewayKind::Bridge => "bridge",
         }
     }
 
@@ -216,6 +232,17 @@ impl Default for ViewDef {
         }
     }
 }
+/// A manifest's `[bridge]` table: the launcher starts and supervises one `conductor bridge`
+/// process for it (like a gateway: not waited for, given up when it cannot run). The bridge reads
+/// and checks the table's contents itself.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BridgeDef {
+    /// Line of the `[bridge]` table (1-based), for messages.
+    pub line: usize,
+}
+
+/// Name under which the launcher reports the bridge process.
+pub const BRIDGE_NAME: &str = "bridge";
 
 /// One executor: a base tick and the components it schedules.
 #[derive(Debug, Clone)]

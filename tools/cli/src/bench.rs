@@ -72,6 +72,39 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// `conductor bench --bridge`: only the bridge benchmark; prints Markdown, writes
+/// `<out>/bridge.md` and `<out>/bridge.json`.
+pub fn run_bridge(a: &BenchArgs) -> Result<()> {
+    let o = crate::bench_bridge::Options {
+        states: a.bridge_states.max(1),
+        rate_hz: a.bridge_rate,
+        seconds: a.seconds.unwrap_or(if a.quick { 3.0 } else { 10.0 }),
+        latency_samples: a
+            .bridge_samples
+            .unwrap_or(if a.quick { 1000 } else { 5000 }),
+        latency_hz: 1000.0,
+        loopback: a.bridge_loopback,
+    };
+    let r = crate::bench_bridge::run(&o)?;
+    let md = r.markdown();
+    println!("{md}");
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| CliError::os("creating the output directory", e))?;
+    std::fs::write(a.out.join("bridge.md"), &md)
+        .and_then(|()| {
+            std::fs::write(
+                a.out.join("bridge.json"),
+                serde_json::to_string_pretty(&r).expect("serialisable"),
+            )
+        })
+        .map_err(|e| CliError::os("writing the bridge report", e))?;
+    eprintln!(
+        "bench: wrote {0}/bridge.md and {0}/bridge.json",
+        a.out.display()
+    );
+    Ok(())
+}
+
 /// `conductor __stress ...`: the stress test's logger and probe processes.
 pub fn stress_tool(args: &[OsString]) -> ExitCode {
     let me = match me() {

@@ -18,6 +18,7 @@ Examples:
   conductor udp-gateway --base-port 2827          plain-text SET/GET/SMP per state (thesis §2.5.2)
   conductor plot run.mcap 'leg/*' -o leg.png      joint plot of recorded states
   conductor bench --quick                         stress test beside cyclictest, ~1 minute
+  conductor bridge --export 'leg/*' --listen tcp/0.0.0.0:7447   states to other hosts over Zenoh
   conductor completions bash > /etc/bash_completion.d/conductor
 
 The domain comes from --domain, else $CONDUCTOR_DOMAIN, else \"default\".
@@ -148,6 +149,10 @@ otherwise; anything else lets the network command the robot.
 Examples:\n  conductor view\n  conductor view --listen 0.0.0.0:8765\n  conductor view --listen 127.0.0.1:0 --clamp"
     )]
     View(ViewArgs),
+    /// Join this domain's bus to Zenoh: export states to other hosts, import theirs as local
+    /// mirror states, carry commands back to the owning executor.
+    #[command(after_help = BRIDGE_HELP)]
+    Bridge(BridgeArgs),
     /// Plot recorded states against time into a PNG (or SVG) image.
     #[command(
         after_help = "Examples:\n  conductor plot run.mcap 'leg/*' -o leg.png --title 'Robot Joint State'\n  conductor plot run.mcap 'leg/*' -o leg.png --flags"
@@ -173,6 +178,13 @@ Examples:\n  conductor bench\n  conductor bench --quick -o /tmp/bench\n  conduct
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<std::ffi::OsString>,
     },
+    /// Raw Zenoh publisher/subscriber of the bridge benchmark.
+    #[command(name = "__bridge-bench", hide = true, disable_help_flag = true)]
+    BridgeBench {
+        /// The helper's own arguments.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
     /// The receiving side of the IPC ping-pong (its role comes from the environment).
     #[command(name = "__pingpong", hide = true)]
     PingPong,
@@ -182,6 +194,61 @@ Examples:\n  conductor bench\n  conductor bench --quick -o /tmp/bench\n  conduct
         /// Shell to generate for.
         shell: clap_complete::Shell,
     },
+}
+
+const BRIDGE_HELP: &str = "\
+Exported states go out as Zenoh key expressions conductor/<domain>/<subsystem>/<state> (the bus
+ABI bytes plus host and sequence); imported ones appear as local states of the same names (or
+under --prefix) that every tool reads unchanged. Only states given to --commands accept remote
+setpoints; they pass the owning executor's checks and watchdog. A link quiet for 2 heartbeats
+marks imported states STALE; they resume when it returns. Peer-to-peer with explicit endpoints
+and multicast scouting off unless told otherwise; TLS, routers and access control: deploy/bridge.md.
+Flags add to the configuration read from --config or from --manifest's [bridge] table.
+
+Examples:
+  robot:        conductor bridge --host robot --listen tcp/0.0.0.0:7447 --export 'leg/*' --commands 'leg/knee'
+  workstation:  conductor bridge --host ws --connect tcp/192.168.1.10:7447 --import default
+  conductor bridge --config bridge.toml";
+
+/// `conductor bridge`.
+#[derive(Debug, Args)]
+pub struct BridgeArgs {
+    /// A bridge.toml (see deploy/bridge.md).
+    #[arg(long, value_name = "FILE", conflicts_with = "manifest")]
+    pub config: Option<PathBuf>,
+    /// A robot manifest: its [bridge] table (what `conductor launch` uses).
+    #[arg(long, value_name = "FILE")]
+    pub manifest: Option<PathBuf>,
+    /// This bridge's host name on Zenoh [default: the machine's host name].
+    #[arg(long, value_name = "NAME")]
+    pub host: Option<String>,
+    /// Zenoh endpoint to listen on (repeatable), e.g. tcp/0.0.0.0:7447.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub listen: Vec<String>,
+    /// Zenoh endpoint to connect to (repeatable), e.g. tcp/192.168.1.10:7447.
+    #[arg(long, value_name = "ENDPOINT")]
+    pub connect: Vec<String>,
+    /// Export the states matching this glob (repeatable).
+    #[arg(long, value_name = "GLOB")]
+    pub export: Vec<String>,
+    /// Exported states that accept remote commands (repeatable glob).
+    #[arg(long, value_name = "GLOB")]
+    pub commands: Vec<String>,
+    /// Export at most this rate per state (Hz) [default: every sample].
+    #[arg(long, value_name = "HZ")]
+    pub rate_hz: Option<f64>,
+    /// Import the states of this remote domain (repeatable).
+    #[arg(long, value_name = "DOMAIN")]
+    pub import: Vec<String>,
+    /// Mirror subsystem name prefix for --import.
+    #[arg(long, default_value = "", value_name = "PREFIX")]
+    pub prefix: String,
+    /// Heartbeat period (ms) [default: 50].
+    #[arg(long, value_name = "MS")]
+    pub heartbeat_ms: Option<u64>,
+    /// A Zenoh JSON5 configuration applied first (TLS, access control).
+    #[arg(long, value_name = "FILE")]
+    pub zenoh_config: Option<PathBuf>,
 }
 
 /// `conductor list`.
@@ -292,6 +359,22 @@ pub struct RecordArgs {
     /// Never draw a progress bar (it is drawn only when stderr is a terminal anyway).
     #[arg(long)]
     pub no_progress: bool,
+    /// Only the bridge benchmark: latency through `conductor bridge` vs raw Zenoh vs the local
+    /// bus, and a load run (CPU % of each bridge, drops); over two network namespaces as root.
+    #[arg(long)]
+    pub bridge: bool,
+    /// States of the bridge load run.
+    #[arg(long, default_value_t = 1000, value_name = "N")]
+    pub bridge_states: usize,
+    /// Rate of the bridge load run (Hz).
+    #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
+    pub bridge_rate: f64,
+    /// Samples per latency path of the bridge benchmark [default: 5000; --quick: 1000].
+    #[arg(long, value_name = "N")]
+    pub bridge_samples: Option<usize>,
+    /// Run the bridge benchmark over loopback even as root.
+    #[arg(long)]
+    pub bridge_loopback: bool,
 }
 
 /// `conductor replay`.
@@ -414,6 +497,22 @@ pub struct BenchArgs {
     /// Never draw a progress bar (it is drawn only when stderr is a terminal anyway).
     #[arg(long)]
     pub no_progress: bool,
+    /// Only the bridge benchmark: latency through `conductor bridge` vs raw Zenoh vs the local
+    /// bus, and a load run (CPU % of each bridge, drops); over two network namespaces as root.
+    #[arg(long)]
+    pub bridge: bool,
+    /// States of the bridge load run.
+    #[arg(long, default_value_t = 1000, value_name = "N")]
+    pub bridge_states: usize,
+    /// Rate of the bridge load run (Hz).
+    #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
+    pub bridge_rate: f64,
+    /// Samples per latency path of the bridge benchmark [default: 5000; --quick: 1000].
+    #[arg(long, value_name = "N")]
+    pub bridge_samples: Option<usize>,
+    /// Run the bridge benchmark over loopback even as root.
+    #[arg(long)]
+    pub bridge_loopback: bool,
 }
 
 /// `conductor launch`.

@@ -48,8 +48,10 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
         gateway: exe.clone(),
         gateway_args: vec!["__score-gateway".into()],
         // A manifest's `[view]`: `conductor view` of this same binary.
-        view: exe,
+        view: exe.clone(),
         view_args: vec!["view".into()],
+        bridge: exe,
+        bridge_args: vec!["bridge".into()],
         domain: domain.map(str::to_string),
         only: a.only.clone(),
         no_rt: a.no_rt,

@@ -8,6 +8,7 @@
 //! * logging: [`record`] and [`replay`] over the MCAP layout in [`recording`], and [`plot`];
 //! * the thesis' external interface: [`udp`] (`udp-gateway`);
 //! * the live view in Foxglove: [`view`] (over `conductor-view`);
+//! * other hosts: [`bridge`] (`bridge`, over `conductor_bridge`);
 //! * the benchmark suite: [`bench`] (`bench`, over `conductor_benches::suite`).
 //!
 //! Long-running commands stop cleanly on Ctrl-C/SIGTERM ([`stop`]).
@@ -15,6 +16,8 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod bench_bridge;
+pub mod bridge;
 pub mod cli;
 pub mod echo;
 pub mod error;
@@ -72,7 +75,9 @@ pub fn run(cli: Cli) -> Result<()> {
              the process's signals)"
                 .into(),
         )),
+        Command::Bench(a) if a.bridge => bench::run_bridge(a),
         Command::Bench(a) => bench::run(a),
+        Command::BridgeBench { args } => bench_bridge::helper(args),
         Command::List(a) => list::run(&bus("list")?, a).map(drop),
         Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
         Command::Set(a) => get_set::set(&bus("set")?, a),
@@ -99,6 +104,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::View(a) => {
             install_stop()?;
             view::run(&bus("view")?, a).map(drop)
+        }
+        Command::Bridge(a) => {
+            install_stop()?;
+            bridge::run(cli.domain.as_deref(), a)
         }
         Command::Plot(a) => plot::run(a).map(drop),
         Command::Completions { shell } => {

@@ -1,4 +1,5 @@
-//! `conductor list`: every state with its metadata, writer and the age of its latest sample.
+//! `conductor list`: every state with its metadata, owning host, writer and the age of its latest
+//! sample.
 
 use std::time::{Duration, Instant};
 
@@ -53,16 +54,21 @@ pub fn run(bus: &Bus, args: &ListArgs) -> Result<usize> {
     }
     let names = probe.node_names()?;
     let now = monotonic_ns();
+    let this_host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .unwrap_or_else(|_| "local".into());
     let mut rows = vec![[
-        "STATE", "UNITS", "RATE_HZ", "RW", "LIMITS", "DEVICE", "WRITER", "VALUE", "AGE",
+        "STATE", "UNITS", "RATE_HZ", "RW", "LIMITS", "DEVICE", "HOST", "WRITER", "VALUE", "AGE",
     ]
     .map(String::from)
     .to_vec()];
     for (s, p) in states.iter().zip(&probed) {
         let m = &s.meta;
-        let writers = p
-            .as_ref()
-            .map(|p| p.writers(&names).join(","))
+        let writer_names = p.as_ref().map(|p| p.writers(&names)).unwrap_or_default();
+        // A mirror imported by `conductor bridge` is written by node `bridge@<owning host>`.
+        let host = conductor_bridge::owning_host(writer_names.iter().map(String::as_str))
+            .map_or_else(|| this_host.clone(), str::to_string);
+        let writers = Some(writer_names.join(","))
             .filter(|w| !w.is_empty())
             .unwrap_or_else(|| "-".into());
         let latest = p.as_ref().and_then(|p| p.latest());
@@ -81,6 +87,7 @@ pub fn run(bus: &Bus, args: &ListArgs) -> Result<usize> {
             } else {
                 m.device.clone()
             },
+            host,
             writers,
             latest.map_or("-".into(), |l| out::value(l.value)),
             latest.map_or("-".into(), |l| {

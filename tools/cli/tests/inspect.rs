@@ -40,9 +40,12 @@ fn list_shows_every_state_with_metadata() {
         .collect();
     assert_eq!(
         rows[0],
-        ["STATE", "UNITS", "RATE_HZ", "RW", "LIMITS", "DEVICE", "WRITER", "VALUE", "AGE"]
+        ["STATE", "UNITS", "RATE_HZ", "RW", "LIMITS", "DEVICE", "HOST", "WRITER", "VALUE", "AGE"]
     );
-    // Sorted by subsystem, then index. AGE is "<number> <unit>", so rows have 10 fields.
+    // Sorted by subsystem, then index. AGE is "<number> <unit>", so rows have 11 fields; HOST
+    // is this machine for states of its own executors.
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").unwrap();
+    let host = host.trim();
     let expect = [
         [
             "arm/grip",
@@ -51,6 +54,7 @@ fn list_shows_every_state_with_metadata() {
             "rw",
             "[0,1]",
             "-",
+            host,
             "executor/arm",
             "0",
         ],
@@ -61,6 +65,7 @@ fn list_shows_every_state_with_metadata() {
             "rw",
             "[-1.5,2]",
             "dKnee",
+            host,
             "executor/leg",
             "0",
         ],
@@ -71,6 +76,7 @@ fn list_shows_every_state_with_metadata() {
             "rw",
             "[-inf,inf]",
             "dHip",
+            host,
             "executor/leg",
             "0",
         ],
@@ -81,19 +87,20 @@ fn list_shows_every_state_with_metadata() {
             "ro",
             "[-5,5]",
             "-",
+            host,
             "executor/leg",
             "0",
         ],
     ];
     assert_eq!(rows.len(), 1 + expect.len(), "{out}");
     for (row, want) in rows[1..].iter().zip(expect) {
-        assert_eq!(row[..8], want, "{out}");
-        assert_eq!(row.len(), 10, "{out}");
+        assert_eq!(row[..9], want, "{out}");
+        assert_eq!(row.len(), 11, "{out}");
         // The simulators publish every tick, so the newest sample is at most a few periods old
         // (generous: a loaded CI machine may stall a thread for a while).
-        let age: f64 = row[8].parse().unwrap();
+        let age: f64 = row[9].parse().unwrap();
         let secs = age
-            * match row[9] {
+            * match row[10] {
                 "ns" => 1e-9,
                 "µs" => 1e-6,
                 "ms" => 1e-3,

@@ -65,9 +65,11 @@ fn setup() -> Result<Vec<(String, String)>> {
     let t = Instant::now();
     let python = python_venv()?;
     rust_target(THUMB)?;
+    // `ip` makes the network namespaces and veth pair of the bridge test (tools/cli/tests/bridge.rs).
     debian_tools(&[
         ("socat", "socat"),
         ("cyclictest", "rt-tests"),
+        ("ip", "iproute2"),
         ("qemu-system-x86_64", "qemu-system-x86"),
         ("candump", "can-utils"),
         ("slcand", "can-utils"),

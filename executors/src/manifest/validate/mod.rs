@@ -31,8 +31,8 @@ use toml::de::DeTable;
 use super::diag::{line_column, one_of, quote_key, Diags};
 use super::reader::{At, Table};
 use super::{
-    DeviceDef, Manifest, ManifestError, SafeSpec, StateDef, Subsystem, DEFAULT_PRIORITY,
-    MAX_RATE_HZ, SUBSYSTEM_KEYS, TOP_KEYS,
+    BridgeDef, DeviceDef, Manifest, ManifestError, SafeSpec, StateDef, Subsystem, BRIDGE_KEYS,
+    DEFAULT_PRIORITY, MAX_RATE_HZ, SUBSYSTEM_KEYS, TOP_KEYS,
 };
 use components::{device, hardware, protocol, state, HwOut, ProtoOut, SafePending};
 use fields::{check_name, fmt_num};
@@ -99,6 +99,18 @@ pub(super) fn validate(
             }
         }
     }
+    let bridge = top.table(&mut cx.d, "bridge").map(|mut b| {
+        // The bridge checks what is inside; here only that the table's keys are known.
+        for k in b.keys() {
+            if BRIDGE_KEYS.contains(&k.as_str()) {
+                b.touch(&k);
+            }
+        }
+        b.finish(&mut cx.d, BRIDGE_KEYS);
+        BridgeDef {
+            line: line_column(source, b.span.start).0,
+        }
+    });
     let mut subsystems = Vec::new();
     let mut subsystem_names: Vec<(String, Range<usize>)> = Vec::new();
     match top.table(&mut cx.d, "subsystems") {
@@ -145,6 +157,7 @@ pub(super) fn validate(
         subsystems: subsystems.into_iter().flatten().collect(),
         gateways: gateways.into_iter().flatten().collect(),
         view: view.flatten(),
+        bridge,
         warnings: cx.d.finish(&file, source),
     })
 }

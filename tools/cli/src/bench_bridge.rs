@@ -1,0 +1,643 @@
+//! `conductor bench --bridge`: the bridge against raw Zenoh over the same link, in one run.
+//!
+//! The link is two network namespaces joined by a veth pair made for the run (as root), else
+//! loopback (said in the report). Three measurements:
+//!
+//! 1. latency, one state at `--bridge-latency-hz`: publish in domain A → a subscriber of the
+//!    mirror in domain B (through both bridges), beside the same subscriber on A's local bus,
+//!    and beside raw Zenoh pub/sub of the same 48-byte payload plus envelope between the two
+//!    namespaces (helper processes `conductor __bridge-bench zpub|zsub`);
+//! 2. load, `--bridge-states` states at `--bridge-rate` Hz for `--seconds`: CPU % of each bridge
+//!    process and the samples that never reached B (drops).
+//!
+//! Latencies compare `t_sample_ns` (stamped at publish) with the receive time: one clock, since
+//! namespaces share the machine's CLOCK_MONOTONIC.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use conductor_bridge::zenoh::{self, Wait};
+use conductor_bus::{
+    monotonic_ns, Bus, Domain, StateMeta, StatePublisher, StateSpec, StateSubscriber,
+};
+
+use crate::error::{CliError, Result};
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// States of the load run.
+    pub states: usize,
+    /// Rate of the load run (Hz).
+    pub rate_hz: f64,
+    /// Seconds of the load run.
+    pub seconds: f64,
+    /// Samples per latency path.
+    pub latency_samples: usize,
+    /// Rate of the latency run (Hz).
+    pub latency_hz: f64,
+    /// Use loopback even as root.
+    pub loopback: bool,
+}
+
+fn err(m: impl Into<String>) -> CliError {
+    CliError::Usage(format!("bench --bridge: {}", m.into()))
+}
+
+fn me() -> Result<std::path::PathBuf> {
+    std::env::current_exe().map_err(|e| CliError::os("finding my own program", e))
+}
+
+struct Netns {
+    ns: [String; 2],
+    addr: [String; 2],
+}
+
+impl Netns {
+    fn make() -> std::result::Result<Self, String> {
+        let pid = std::process::id();
+        let ns = [format!("cdr-bba-{pid}"), format!("cdr-bbb-{pid}")];
+        let veth = [
+            format!("cbba{}", pid % 100_000),
+            format!("cbbb{}", pid % 100_000),
+        ];
+        let net = 1 + pid % 250;
+        let addr = [format!("10.214.{net}.1"), format!("10.214.{net}.2")];
+        let me = Netns {
+            ns: ns.clone(),
+            addr: addr.clone(),
+        };
+        let ip = |args: &[&str]| -> std::result::Result<(), String> {
+            let o = Command::new("ip")
+                .args(args)
+                .output()
+                .map_err(|e| e.to_string())?;
+            o.status
+                .success()
+                .then_some(())
+                .ok_or_else(|| String::from_utf8_lossy(&o.stderr).trim().to_string())
+        };
+        ip(&["netns", "add", &ns[0]])?;
+        ip(&["netns", "add", &ns[1]])?;
+        ip(&[
+            "link", "add", &veth[0], "type", "veth", "peer", "name", &veth[1],
+        ])?;
+        for i in 0..2 {
+            ip(&["link", "set", &veth[i], "netns", &ns[i]])?;
+            ip(&[
+                "-n",
+                &ns[i],
+                "addr",
+                "add",
+                &format!("{}/30", addr[i]),
+                "dev",
+                &veth[i],
+            ])?;
+            ip(&["-n", &ns[i], "link", "set", &veth[i], "up"])?;
+            ip(&["-n", &ns[i], "link", "set", "lo", "up"])?;
+        }
+        Ok(me)
+    }
+}
+
+impl Drop for Netns {
+    fn drop(&mut self) {
+        for n in &self.ns {
+            let _ = Command::new("ip").args(["netns", "delete", n]).output();
+        }
+    }
+}
+
+struct Sides {
+    netns: Option<Netns>,
+    port: u16,
+}
+
+impl Sides {
+    fn endpoint(&self, i: usize) -> String {
+        match &self.netns {
+            Some(n) => format!("tcp/{}:{}", n.addr[i], self.port),
+            None => format!("tcp/127.0.0.1:{}", self.port + i as u16),
+        }
+    }
+
+    fn command(&self, i: usize) -> Result<Command> {
+        Ok(match &self.netns {
+            Some(n) => {
+                let mut c = Command::new("ip");
+                c.args(["netns", "exec", &n.ns[i]]).arg(me()?);
+                c
+            }
+            None => Command::new(me()?),
+        })
+    }
+
+    fn describe(&self) -> &'static str {
+        if self.netns.is_some() {
+            "two network namespaces joined by a veth pair"
+        } else {
+            "loopback (not root, or --bridge-loopback)"
+        }
+    }
+}
+
+struct Helper {
+    child: Child,
+    lines: std::sync::mpsc::Receiver<String>,
+}
+
+impl Helper {
+    fn spawn(mut c: Command) -> Result<Self> {
+        let mut child = c
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .map_err(|e| CliError::os("starting a bench helper", e))?;
+        let (tx, lines) = std::sync::mpsc::channel();
+        let out = child.stdout.take().expect("piped");
+        std::thread::spawn(move || {
+            for l in BufReader::new(out)
+                .lines()
+                .map_while(std::result::Result::ok)
+            {
+                let _ = tx.send(l);
+            }
+        });
+        Ok(Self { child, lines })
+    }
+
+    fn line(&self, starts: &str, timeout: Duration) -> Result<String> {
+        let end = Instant::now() + timeout;
+        while let Some(left) = end.checked_duration_since(Instant::now()) {
+            match self.lines.recv_timeout(left) {
+                Ok(l) if l.starts_with(starts) => return Ok(l),
+                Ok(_) => {}
+                Err(_) => break,
+            }
+        }
+        Err(err(format!("no {starts:?} line from a helper")))
+    }
+
+    /// The process doing the work (through `ip netns exec`, which execs it).
+    fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    fn stop(mut self) {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(self.child.id() as i32, libc::SIGINT) };
+        let end = Instant::now() + Duration::from_secs(10);
+        while self.child.try_wait().ok().flatten().is_none() && Instant::now() < end {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// CPU seconds (user + system) of a process so far.
+fn cpu_seconds(pid: u32) -> f64 {
+    let Ok(s) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+        return 0.0;
+    };
+    // Fields after the command name (which may contain spaces) start after the last ')'.
+    let rest = s.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks: f64 = f.get(11).and_then(|u| u.parse().ok()).unwrap_or(0.0)
+        + f.get(12).and_then(|u| u.parse().ok()).unwrap_or(0.0);
+    // SAFETY: sysconf has no preconditions.
+    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
+    ticks / hz.max(1.0)
+}
+
+fn percentile(v: &mut [u64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_unstable();
+    let i = ((v.len() - 1) as f64 * p).round() as usize;
+    v[i] as f64 / 1e3
+}
+
+fn specs(n: usize, rate: f64) -> Vec<StateSpec> {
+    (0..n)
+        .map(|i| {
+            StateSpec::new(
+                format!("s{i}"),
+                StateMeta {
+                    index: i as u32,
+                    rate_hz: rate,
+                    ..StateMeta::default()
+                },
+            )
+        })
+        .collect()
+}
+
+/// Publishes `n` states of `subsystem` at `rate` in its own thread until `stop`; returns the
+/// number of ticks published.
+fn publisher(
+    d: &Domain,
+    subsystem: &str,
+    n: usize,
+    rate: f64,
+    stop: Arc<AtomicBool>,
+) -> std::thread::JoinHandle<Result<u64>> {
+    let (d, subsystem) = (d.clone(), subsystem.to_string());
+    std::thread::spawn(move || {
+        let bus = Bus::open(&d, "bench-publisher")?;
+        let mut p = StatePublisher::create(&bus, &subsystem, &specs(n, rate))?;
+        let period = Duration::from_secs_f64(1.0 / rate);
+        let mut next = Instant::now();
+        let mut tick = 0u64;
+        while !stop.load(Ordering::Relaxed) {
+            tick += 1;
+            for i in 0..n {
+                p.publish(i, tick, monotonic_ns(), tick as f64, 0)?;
+            }
+            p.notify_tick()?;
+            next += period;
+            let now = Instant::now();
+            if next > now {
+                std::thread::sleep(next - now);
+            } else {
+                next = now;
+            }
+        }
+        Ok(tick)
+    })
+}
+
+fn bridge(sides: &Sides, i: usize, d: &Domain, remote: &Domain, export: &str) -> Result<Helper> {
+    let mut c = sides.command(i)?;
+    c.arg("--domain").arg(d.name()).arg("bridge");
+    c.args(["--host", if i == 0 { "bench-a" } else { "bench-b" }]);
+    c.arg("--listen").arg(sides.endpoint(i));
+    if i == 0 {
+        c.args(["--export", export]);
+    } else {
+        c.arg("--connect").arg(sides.endpoint(0));
+        c.args(["--import", remote.name()]);
+    }
+    let h = Helper::spawn(c)?;
+    h.line("ready bridge", Duration::from_secs(180))?;
+    Ok(h)
+}
+
+fn wait_listed(bus: &Bus, name: &str) -> Result<()> {
+    let end = Instant::now() + Duration::from_secs(180);
+    while bus.resolve(name).is_err() {
+        if Instant::now() > end {
+            return Err(err(format!(
+                "{name} never appeared in domain {}",
+                bus.domain().name()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Ok(())
+}
+
+/// The figures of one run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Report {
+    /// How the two sides were joined.
+    pub link: String,
+    /// Latency p50/p99 (µs): local bus, raw Zenoh, bridge.
+    pub local_us: (f64, f64),
+    /// Raw Zenoh pub/sub over the link.
+    pub zenoh_us: (f64, f64),
+    /// Through both bridges.
+    pub bridge_us: (f64, f64),
+    /// States × rate of the load run.
+    pub load: (usize, f64, f64),
+    /// CPU % of the exporting and the importing bridge during the load run.
+    pub cpu_percent: (f64, f64),
+    /// Samples published and received on B during the load run.
+    pub published: u64,
+    /// Received by B's subscribers.
+    pub received: u64,
+}
+
+impl Report {
+    /// A Markdown section.
+    pub fn markdown(&self) -> String {
+        let r = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+        format!(
+            "### Bridge ({link})\n\n\
+             | path | p50 µs | p99 µs | p50 vs raw Zenoh | p99 vs raw Zenoh |\n|---|---|---|---|---|\n\
+             | local bus (iceoryx2) | {:.1} | {:.1} | {:.2}× | {:.2}× |\n\
+             | raw Zenoh pub/sub | {:.1} | {:.1} | 1.00× | 1.00× |\n\
+             | bridge (export → Zenoh → import) | {:.1} | {:.1} | {:.2}× | {:.2}× |\n\n\
+             Load: {} states at {} Hz for {} s: exporting bridge {:.1} % CPU, importing bridge \
+             {:.1} % CPU; {} of {} samples reached B ({} dropped, {:.3} %).\n",
+            self.local_us.0,
+            self.local_us.1,
+            r(self.local_us.0, self.zenoh_us.0),
+            r(self.local_us.1, self.zenoh_us.1),
+            self.zenoh_us.0,
+            self.zenoh_us.1,
+            self.bridge_us.0,
+            self.bridge_us.1,
+            r(self.bridge_us.0, self.zenoh_us.0),
+            r(self.bridge_us.1, self.zenoh_us.1),
+            self.load.0,
+            self.load.1,
+            self.load.2,
+            self.cpu_percent.0,
+            self.cpu_percent.1,
+            self.received,
+            self.published,
+            self.published.saturating_sub(self.received),
+            100.0 * self.published.saturating_sub(self.received) as f64
+                / (self.published.max(1) as f64),
+            link = self.link,
+        )
+    }
+}
+
+/// Runs the whole benchmark.
+pub fn run(o: &Options) -> Result<Report> {
+    // SAFETY: geteuid has no preconditions.
+    let root = unsafe { libc::geteuid() } == 0;
+    let netns = if root && !o.loopback {
+        match Netns::make() {
+            Ok(n) => Some(n),
+            Err(e) => {
+                eprintln!("bench --bridge: no network namespaces ({e}); using loopback");
+                None
+            }
+        }
+    } else {
+        None
+    };
+    let port = if netns.is_some() {
+        7447
+    } else {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").map_err(|e| CliError::os("port", e))?;
+        let p = l.local_addr().map_err(|e| CliError::os("port", e))?.port();
+        drop(l);
+        p
+    };
+    let sides = Sides { netns, port };
+
+    // 1. Raw Zenoh between the two sides.
+    let n = o.latency_samples;
+    let mut sub = sides.command(1)?;
+    sub.args(["__bridge-bench", "zsub", "--count"])
+        .arg(n.to_string())
+        .arg("--endpoint")
+        .arg(sides.endpoint(1));
+    let sub = Helper::spawn(sub)?;
+    sub.line("ready", Duration::from_secs(30))?;
+    let mut publ = sides.command(0)?;
+    publ.args(["__bridge-bench", "zpub", "--count"])
+        .arg((n + n / 10 + 50).to_string())
+        .arg("--rate")
+        .arg(o.latency_hz.to_string())
+        .arg("--endpoint")
+        .arg(sides.endpoint(1));
+    let publ = Helper::spawn(publ)?;
+    let line = sub.line(
+        "latency",
+        Duration::from_secs_f64(60.0 + 3.0 * n as f64 / o.latency_hz),
+    )?;
+    publ.stop();
+    sub.stop();
+    let nums: Vec<f64> = line
+        .split_whitespace()
+        .skip(1)
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    let zenoh_us = (
+        nums.first().copied().unwrap_or(f64::NAN),
+        nums.get(1).copied().unwrap_or(f64::NAN),
+    );
+
+    // 2. Through the bridges, beside the local bus.
+    let a = Domain::unique("bbench-a")?;
+    let b = Domain::unique("bbench-b")?;
+    let ex = bridge(&sides, 0, &a, &b, "lat/*")?;
+    let im = bridge(&sides, 1, &b, &a, "")?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let p = publisher(&a, "lat", 1, o.latency_hz, stop.clone());
+    let bus_a = Bus::open(&a, "bench-a")?;
+    let bus_b = Bus::open(&b, "bench-b")?;
+    wait_listed(&bus_b, "lat/s0")?;
+    let mut sa = StateSubscriber::with_buffer(&bus_a, "lat/s0", 16)?;
+    let mut sb = StateSubscriber::with_buffer(&bus_b, "lat/s0", 16)?;
+    // Let the mirror settle, then measure.
+    std::thread::sleep(Duration::from_millis(300));
+    while sa.receive()?.is_some() || sb.receive()?.is_some() {}
+    let (mut la, mut lb) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let end = Instant::now() + Duration::from_secs_f64(30.0 + 3.0 * n as f64 / o.latency_hz);
+    while (la.len() < n || lb.len() < n) && Instant::now() < end {
+        let mut idle = true;
+        if let Some(s) = sa.receive()? {
+            la.push(monotonic_ns().saturating_sub(s.t_sample_ns));
+            idle = false;
+        }
+        if let Some(s) = sb.receive()? {
+            if s.status & conductor_bus::status::STALE == 0 {
+                lb.push(monotonic_ns().saturating_sub(s.t_sample_ns));
+            }
+            idle = false;
+        }
+        if idle {
+            std::thread::yield_now();
+        }
+    }
+    stop.store(true, Ordering::Relaxed);
+    p.join().map_err(|_| err("publisher panicked"))??;
+    ex.stop();
+    im.stop();
+    let local_us = (percentile(&mut la, 0.5), percentile(&mut la, 0.99));
+    let bridge_us = (percentile(&mut lb, 0.5), percentile(&mut lb, 0.99));
+
+    // 3. Load.
+    let a = Domain::unique("bbload-a")?;
+    let b = Domain::unique("bbload-b")?;
+    let stop = Arc::new(AtomicBool::new(false));
+    let p = publisher(&a, "load", o.states, o.rate_hz, stop.clone());
+    let bus_a = Bus::open(&a, "bench-a")?;
+    wait_listed(&bus_a, &format!("load/s{}", o.states - 1))?;
+    let ex = bridge(&sides, 0, &a, &b, "load/*")?;
+    let im = bridge(&sides, 1, &b, &a, "")?;
+    let bus_b = Bus::open(&b, "bench-b")?;
+    wait_listed(&bus_b, &format!("load/s{}", o.states - 1))?;
+    let mut subs = bus_b
+        .list_states()?
+        .into_iter()
+        .filter(|s| s.subsystem == "load")
+        .map(|s| StateSubscriber::from_info(&bus_b, s, 256))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    std::thread::sleep(Duration::from_millis(500));
+    for s in &mut subs {
+        while s.receive()?.is_some() {}
+    }
+    // Count what B receives of the ticks published from here on.
+    let first_tick = {
+        let mut t = 0;
+        for s in &mut subs {
+            if let Some(x) = s.latest()? {
+                t = t.max(x.tick);
+            }
+        }
+        t
+    };
+    let (c0, c1) = (cpu_seconds(ex.pid()), cpu_seconds(im.pid()));
+    let t0 = Instant::now();
+    let mut received = 0u64;
+    let dur = Duration::from_secs_f64(o.seconds);
+    while t0.elapsed() < dur {
+        for s in &mut subs {
+            while let Some(x) = s.receive()? {
+                if x.tick > first_tick && x.status & conductor_bus::status::STALE == 0 {
+                    received += 1;
+                }
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let wall = t0.elapsed().as_secs_f64();
+    let cpu = (
+        100.0 * (cpu_seconds(ex.pid()) - c0) / wall,
+        100.0 * (cpu_seconds(im.pid()) - c1) / wall,
+    );
+    stop.store(true, Ordering::Relaxed);
+    let total_ticks = p.join().map_err(|_| err("publisher panicked"))??;
+    // Let the tail arrive, then count it.
+    std::thread::sleep(Duration::from_millis(500));
+    for s in &mut subs {
+        while let Some(x) = s.receive()? {
+            if x.tick > first_tick
+                && x.tick <= total_ticks
+                && x.status & conductor_bus::status::STALE == 0
+            {
+                received += 1;
+            }
+        }
+    }
+    let published = (total_ticks - first_tick) * o.states as u64;
+    ex.stop();
+    im.stop();
+    Ok(Report {
+        link: sides.describe().into(),
+        local_us,
+        zenoh_us,
+        bridge_us,
+        load: (o.states, o.rate_hz, o.seconds),
+        cpu_percent: cpu,
+        published,
+        received,
+    })
+}
+
+/// `conductor __bridge-bench zpub|zsub`: raw Zenoh pub/sub of a sample-sized payload.
+pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
+    let a: Vec<String> = args
+        .iter()
+        .map(|s| s.to_string_lossy().into_owned())
+        .collect();
+    let get = |k: &str| {
+        a.iter()
+            .position(|x| x == k)
+            .and_then(|i| a.get(i + 1))
+            .cloned()
+            .ok_or_else(|| err(format!("missing {k}")))
+    };
+    let role = a.first().cloned().unwrap_or_default();
+    let count: usize = get("--count")?.parse().map_err(|_| err("--count"))?;
+    let endpoint = get("--endpoint")?;
+    let mut cfg = zenoh::Config::default();
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| {
+        c.insert_json5(k, v).map_err(|e| err(format!("{k}: {e}")))
+    };
+    set(&mut cfg, "mode", "\"peer\"")?;
+    set(&mut cfg, "scouting/multicast/enabled", "false")?;
+    let key = "conductor/bench/raw/s0";
+    let envelope = conductor_bridge::wire::Envelope {
+        host: "bench-a".into(),
+        session: 1,
+        seq: 0,
+    };
+    match role.as_str() {
+        "zsub" => {
+            set(&mut cfg, "listen/endpoints", &format!("[\"{endpoint}\"]"))?;
+            let z = zenoh::open(cfg).wait().map_err(|e| err(e.to_string()))?;
+            let (tx, rx) = std::sync::mpsc::channel::<u64>();
+            let _s = z
+                .declare_subscriber(key)
+                .callback(move |s| {
+                    let now = monotonic_ns();
+                    if let Ok(x) = conductor_bridge::wire::decode_sample(&s.payload().to_bytes()) {
+                        let _ = tx.send(now.saturating_sub(x.t_sample_ns));
+                    }
+                })
+                .wait()
+                .map_err(|e| err(e.to_string()))?;
+            println!("ready");
+            let mut v = Vec::with_capacity(count);
+            // Skip the first samples (connection set-up).
+            let mut skip = 20;
+            while v.len() < count {
+                match rx.recv_timeout(Duration::from_secs(60)) {
+                    Ok(_) if skip > 0 => skip -= 1,
+                    Ok(ns) => v.push(ns),
+                    Err(_) => break,
+                }
+            }
+            println!(
+                "latency {} {} {}",
+                percentile(&mut v, 0.5),
+                percentile(&mut v, 0.99),
+                v.len()
+            );
+            let _ = z.close().wait();
+            Ok(())
+        }
+        "zpub" => {
+            set(&mut cfg, "connect/endpoints", &format!("[\"{endpoint}\"]"))?;
+            let rate: f64 = get("--rate")?.parse().map_err(|_| err("--rate"))?;
+            let z = zenoh::open(cfg).wait().map_err(|e| err(e.to_string()))?;
+            let p = z
+                .declare_publisher(key)
+                .congestion_control(zenoh::qos::CongestionControl::Drop)
+                .wait()
+                .map_err(|e| err(e.to_string()))?;
+            std::thread::sleep(Duration::from_millis(500));
+            let period = Duration::from_secs_f64(1.0 / rate);
+            let mut next = Instant::now();
+            for i in 0..count as u64 {
+                let s = conductor_bus::StateSample {
+                    seq: i,
+                    tick: i,
+                    t_sample_ns: monotonic_ns(),
+                    t_publish_ns: monotonic_ns(),
+                    value: i as f64,
+                    status: 0,
+                    reserved: 0,
+                };
+                let env = conductor_bridge::wire::Envelope {
+                    seq: i,
+                    ..envelope.clone()
+                };
+                p.put(conductor_bridge::wire::encode_sample(&s).to_vec())
+                    .attachment(env.encode())
+                    .wait()
+                    .map_err(|e| err(e.to_string()))?;
+                next += period;
+                let now = Instant::now();
+                if next > now {
+                    std::thread::sleep(next - now);
+                }
+            }
+            let _ = z.close().wait();
+            Ok(())
+        }
+        other => Err(err(format!("unknown helper role {other:?}"))),
+    }
+}
