@@ -159,7 +159,10 @@ fn a_score_gateway_in_the_manifest_publishes_is_restarted_and_stops_cleanly() {
     // subscriber sees the board's next value.
     let victim = gw.pid.unwrap();
     kill(victim, libc::SIGKILL);
+    // Reading on meanwhile, so the subscriber sees the new owner's first samples (its sequence
+    // starting again) rather than only the newest of a full buffer.
     let back = eventually("the gateway restarted and ready", || {
+        while adc0.receive().unwrap().is_some() {}
         Some(info(&launch, "board")).filter(|i| i.restarts == 1 && i.ready)
     });
     assert_ne!(back.pid, Some(victim));
