@@ -215,8 +215,13 @@ impl Recording {
     /// `truncated` set.
     pub fn load(path: &Path) -> Result<Self> {
         let buf = std::fs::read(path).map_err(|e| CliError::io(path, e))?;
+        Self::from_bytes(path, &buf)
+    }
+
+    /// Reads a recording already in memory; `path` names it in errors. As [`Recording::load`].
+    pub fn from_bytes(path: &Path, buf: &[u8]) -> Result<Self> {
         let stream =
-            mcap::MessageStream::new_with_options(&buf, mcap::read::Options::IgnoreEndMagic.into())
+            mcap::MessageStream::new_with_options(buf, mcap::read::Options::IgnoreEndMagic.into())
                 .map_err(|e| CliError::mcap(path, e))?;
         let mut rec = Recording::default();
         let mut ids: BTreeMap<u16, u16> = BTreeMap::new();
@@ -256,7 +261,7 @@ impl Recording {
                 tick: body.tick,
             });
         }
-        if !rec.truncated && mcap::read::footer(&buf).is_err() {
+        if !rec.truncated && mcap::read::footer(buf).is_err() {
             rec.truncated = true;
         }
         rec.samples.sort_by_key(|s| s.t_ns);
