@@ -4,9 +4,12 @@
 
 use conductor_executor::manifest::Manifest;
 
+/// A target's check: panics when the input shows a bug.
+pub type Check = fn(&[u8]);
+
 /// Every target: its name (the binary in `fuzz_targets/`, the folder under `seeds/` and
 /// `regressions/`) and its check.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[("manifest", manifest)];
+pub const TARGETS: &[(&str, Check)] = &[("manifest", manifest)];
 
 /// TOML text through the whole reader (syntax, schema, kinds, links, limits, bus load): it
 /// never panics; a refusal lists at least one error with its position; an accepted manifest's

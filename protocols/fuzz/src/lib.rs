@@ -15,9 +15,12 @@ use conductor_protocols::slcan::{
     Command, CommandKind, DeviceScanner, Dialect, HostScanner, Line, PendingAcks, Response, BEL, CR,
 };
 
+/// A target's check: panics when the input shows a bug.
+pub type Check = fn(&[u8]);
+
 /// Every target: its name (the binary in `fuzz_targets/`, the folder under `seeds/` and
 /// `regressions/`) and its check.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[
+pub const TARGETS: &[(&str, Check)] = &[
     ("dxl2_scanner", dxl2_scanner),
     ("dxl2_decode", dxl2_decode),
     ("dxl1_scanner", dxl1_scanner),

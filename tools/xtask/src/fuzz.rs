@@ -256,10 +256,18 @@ fn campaign(dir: &Path, krate: &str, target: &str, o: &Options) -> Result<Outcom
     let mut note = String::new();
     if !out.status.success() && crashes.is_empty() {
         note = format!("exit {}; see {}", out.status, log_path.display());
-    } else if let Some(line) = log
-        .lines()
-        .find(|l| l.contains("panicked at") || l.contains("ERROR: libFuzzer"))
-    {
+    } else if let Some(i) = log.lines().position(|l| l.contains("panicked at")) {
+        // `thread '…' panicked at file:line:col:` then the message on the next line.
+        let mut lines = log.lines().skip(i);
+        let at = lines.next().unwrap_or_default();
+        let at = at
+            .split("panicked at ")
+            .nth(1)
+            .unwrap_or(at)
+            .trim_end_matches(':');
+        let msg = lines.next().unwrap_or_default().trim();
+        note = format!("{at}: {msg}").chars().take(120).collect();
+    } else if let Some(line) = log.lines().find(|l| l.contains("ERROR: libFuzzer")) {
         note = line.trim().chars().take(120).collect();
     }
     if o.update_seeds {

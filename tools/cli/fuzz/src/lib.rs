@@ -9,9 +9,12 @@ use conductor_cli::recording::Recording;
 use conductor_cli::replay;
 use conductor_cli::udp::protocol::{self, Malformed, Request, MAX_REQUEST};
 
+/// A target's check: panics when the input shows a bug.
+pub type Check = fn(&[u8]);
+
 /// Every target: its name (the binary in `fuzz_targets/`, the folder under `seeds/` and
 /// `regressions/`) and its check.
-pub const TARGETS: &[(&str, fn(&[u8]))] = &[("udp_request", udp_request), ("recording", recording)];
+pub const TARGETS: &[(&str, Check)] = &[("udp_request", udp_request), ("recording", recording)];
 
 /// One datagram of the thesis' UDP text protocol: a `SET` value is finite and prints back to
 /// the same request; a refusal's text (sent back to the client) is short printable ASCII.
