@@ -41,7 +41,9 @@ pub fn pass_ns(rec: &Recording, states: usize) -> u64 {
     };
     let span = last.t_ns - first.t_ns;
     let per_channel = (rec.samples.len() / states.max(1)).max(2) as u64;
-    let pass_ns = span + span / (per_channel - 1);
+    // Saturating: a damaged file's times can span nearly all of u64 (found by the `recording`
+    // fuzz target; fuzz/regressions/recording/replay-span-overflows-pass-length).
+    let pass_ns = span.saturating_add(span / (per_channel - 1));
     if pass_ns > 0 {
         return pass_ns;
     }
