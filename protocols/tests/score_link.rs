@@ -191,6 +191,60 @@ fn long_text_is_refused_not_cut() {
     );
 }
 
+/// Found by the `score_link_decode` fuzz target (fuzz/regressions/score_link_decode/): a Hello
+/// whose firmware name was 110 bytes decoded, though no conforming board can send it (the
+/// encoder refuses names over 64 bytes). Every string field is now checked against the same
+/// limit on both sides.
+#[test]
+fn strings_over_their_field_limit_are_refused_when_decoded_too() {
+    let text = "t".repeat(MAX_TEXT);
+    let hello = Hello {
+        protocol: VERSION,
+        firmware: "f",
+        board: "b",
+        number_type: "f32",
+        generation: 1,
+        t_us: 2,
+        max_subscriptions: 3,
+    };
+    // Encodable at the limit: decodes.
+    let (msgs, _) = messages(&frame_reply(1, &Reply::Output { text: &text }));
+    assert!(decode_reply(&msgs[0]).is_ok());
+    // One byte over each limit, written by hand (the encoder would refuse): refused.
+    let with_long = |field: usize, limit: usize| {
+        let (msgs, _) = messages(&frame_reply(1, &Reply::Hello(hello)));
+        let mut m = msgs[0].clone();
+        // Header (4), protocol (1), then firmware, board, number_type as length + bytes.
+        let mut at = 5;
+        for _ in 0..field {
+            at += 1 + m[at] as usize;
+        }
+        let old = m[at] as usize;
+        m.splice(
+            at..at + 1 + old,
+            [vec![(limit + 1) as u8], vec![b'x'; limit + 1]].concat(),
+        );
+        m
+    };
+    for (field, limit) in [(0, 64), (1, 64), (2, 16)] {
+        assert_eq!(
+            decode_reply(&with_long(field, limit)),
+            Err(MessageError::TooLong),
+            "field {field}"
+        );
+        // At the limit it decodes.
+        let mut m = with_long(field, limit);
+        let at = m.iter().position(|&b| b == (limit + 1) as u8).unwrap();
+        m[at] = limit as u8;
+        m.remove(at + 1);
+        assert!(decode_reply(&m).is_ok(), "field {field}");
+    }
+    let (mut msgs, _) = messages(&frame_request(1, &Request::Exec { line: &text }));
+    msgs[0][4] = (MAX_TEXT + 1) as u8;
+    msgs[0].push(b'x');
+    assert_eq!(decode_request(&msgs[0]), Err(MessageError::TooLong));
+}
+
 #[test]
 fn other_version_and_unknown_kind_are_typed_errors() {
     let (msgs, _) = messages(&frame_request(1, &Request::Time));

@@ -11,6 +11,14 @@ pub const MAX_SAMPLES: usize = (MAX_MESSAGE - HEADER - 13) / 9;
 
 const HEADER: usize = 4;
 
+// Longest strings of each field, in bytes; the encoder refuses and the decoder rejects longer.
+const FIRMWARE_MAX: usize = 64;
+const BOARD_MAX: usize = 64;
+const NUMBER_TYPE_MAX: usize = 16;
+const KIND_MAX: usize = 32;
+const UNIT_MAX: usize = 16;
+const NAME_MAX: usize = 64;
+
 /// A message could not be encoded or decoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
 pub enum MessageError {
@@ -128,11 +136,11 @@ impl ErrorCode {
 pub struct Hello<'a> {
     /// Protocol version the board speaks (= [`VERSION`] when the message decoded).
     pub protocol: u8,
-    /// Firmware name and version.
+    /// Firmware name and version (at most 64 bytes).
     pub firmware: &'a str,
-    /// Board name (the gateway's default subsystem is `score-<board>`).
+    /// Board name (the gateway's default subsystem is `score-<board>`; at most 64 bytes).
     pub board: &'a str,
-    /// The engine's number type (`f32` or `f64`).
+    /// The engine's number type (`f32` or `f64`; at most 16 bytes).
     pub number_type: &'a str,
     /// The variable table's generation (changes with every definition or deletion).
     pub generation: u32,
@@ -153,15 +161,15 @@ pub struct VarEntry<'a> {
     pub total: u8,
     /// Slot: the address used by [`Request::Subscribe`] and [`Request::Set`].
     pub id: u8,
-    /// What the variable is, as `score-core` names it (`AdcVolts`, `Pid`, ...).
+    /// What the variable is, as `score-core` names it (`AdcVolts`, `Pid`, ...; at most 32 bytes).
     pub kind: &'a str,
     /// Accepts [`Request::Set`].
     pub writable: bool,
     /// Update rate when periodic.
     pub rate_hz: Option<f64>,
-    /// Unit (`V`, `count`, `%`, `1`), empty when unitless.
+    /// Unit (`V`, `count`, `%`, `1`), empty when unitless (at most 16 bytes).
     pub unit: &'a str,
-    /// Name.
+    /// Name (at most 64 bytes).
     pub name: &'a str,
 }
 
@@ -387,9 +395,9 @@ fn write_reply(seq: u16, reply: &Reply<'_>, w: &mut Out<'_>) -> Result<(), Messa
         Reply::Hello(h) => {
             header(w, kind::R_HELLO, seq)?;
             w.u8(h.protocol)?;
-            w.str(h.firmware, 64)?;
-            w.str(h.board, 64)?;
-            w.str(h.number_type, 16)?;
+            w.str(h.firmware, FIRMWARE_MAX)?;
+            w.str(h.board, BOARD_MAX)?;
+            w.str(h.number_type, NUMBER_TYPE_MAX)?;
             w.u32(h.generation)?;
             w.u64(h.t_us)?;
             w.u8(h.max_subscriptions)
@@ -400,12 +408,12 @@ fn write_reply(seq: u16, reply: &Reply<'_>, w: &mut Out<'_>) -> Result<(), Messa
             w.u8(v.index)?;
             w.u8(v.total)?;
             w.u8(v.id)?;
-            w.str(v.kind, 32)?;
+            w.str(v.kind, KIND_MAX)?;
             w.u8(v.writable as u8)?;
             // No rate is sent as NaN: a periodic variable's rate is always finite and positive.
             w.f64(v.rate_hz.unwrap_or(f64::NAN))?;
-            w.str(v.unit, 16)?;
-            w.str(v.name, 64)
+            w.str(v.unit, UNIT_MAX)?;
+            w.str(v.name, NAME_MAX)
         }
         Reply::ListEnd { generation, count } => {
             header(w, kind::R_LIST_END, seq)?;
@@ -503,7 +511,9 @@ pub fn decode_request(msg: &[u8]) -> Result<(u16, Request<'_>), MessageError> {
             value: r.f64()?,
             generation: r.u32()?,
         },
-        kind::EXEC => Request::Exec { line: r.str()? },
+        kind::EXEC => Request::Exec {
+            line: r.str(MAX_TEXT)?,
+        },
         kind::TIME => Request::Time,
         other => return Err(MessageError::UnknownKind(other)),
     };
@@ -518,9 +528,9 @@ pub fn decode_reply(msg: &[u8]) -> Result<(u16, Reply<'_>), MessageError> {
     let reply = match k {
         kind::R_HELLO => Reply::Hello(Hello {
             protocol: r.u8()?,
-            firmware: r.str()?,
-            board: r.str()?,
-            number_type: r.str()?,
+            firmware: r.str(FIRMWARE_MAX)?,
+            board: r.str(BOARD_MAX)?,
+            number_type: r.str(NUMBER_TYPE_MAX)?,
             generation: r.u32()?,
             t_us: r.u64()?,
             max_subscriptions: r.u8()?,
@@ -530,11 +540,11 @@ pub fn decode_reply(msg: &[u8]) -> Result<(u16, Reply<'_>), MessageError> {
             index: r.u8()?,
             total: r.u8()?,
             id: r.u8()?,
-            kind: r.str()?,
+            kind: r.str(KIND_MAX)?,
             writable: r.bool()?,
             rate_hz: Some(r.f64()?).filter(|v| !v.is_nan()),
-            unit: r.str()?,
-            name: r.str()?,
+            unit: r.str(UNIT_MAX)?,
+            name: r.str(NAME_MAX)?,
         }),
         kind::R_LIST_END => Reply::ListEnd {
             generation: r.u32()?,
@@ -542,7 +552,9 @@ pub fn decode_reply(msg: &[u8]) -> Result<(u16, Reply<'_>), MessageError> {
         },
         kind::R_ACK => Reply::Ack,
         kind::R_SET_DONE => Reply::SetDone { value: r.f64()? },
-        kind::R_OUTPUT => Reply::Output { text: r.str()? },
+        kind::R_OUTPUT => Reply::Output {
+            text: r.str(MAX_TEXT)?,
+        },
         kind::R_EXEC_DONE => Reply::ExecDone {
             ok: r.bool()?,
             generation: r.u32()?,
@@ -550,7 +562,7 @@ pub fn decode_reply(msg: &[u8]) -> Result<(u16, Reply<'_>), MessageError> {
         kind::R_TIME => Reply::Time { t_us: r.u64()? },
         kind::R_ERROR => Reply::Error {
             code: ErrorCode::from_u8(r.u8()?)?,
-            text: r.str()?,
+            text: r.str(MAX_TEXT)?,
         },
         kind::E_SAMPLES => {
             let t_us = r.u64()?;

@@ -55,9 +55,13 @@ impl<'a> Reader<'a> {
         }
     }
 
-    /// A string: length u8, then UTF-8 bytes.
-    pub(crate) fn str(&mut self) -> Result<&'a str, MessageError> {
+    /// A string: length u8, then UTF-8 bytes; longer than `max` is refused, as the encoder
+    /// refuses to write it (a peer gets nothing a conforming sender could not have sent).
+    pub(crate) fn str(&mut self, max: usize) -> Result<&'a str, MessageError> {
         let n = self.u8()? as usize;
+        if n > max {
+            return Err(MessageError::TooLong);
+        }
         core::str::from_utf8(self.bytes(n)?).map_err(|_| MessageError::BadUtf8)
     }
 

@@ -242,8 +242,27 @@ impl Recording {
     /// `truncated` set.
     pub fn load(path: &Path) -> Result<Self> {
         let buf = std::fs::read(path).map_err(|e| CliError::io(path, e))?;
+        Self::from_bytes(path, &buf)
+    }
+
+    /// Reads a recording already in memory; `path` names it in errors. As [`Recording::load`].
+    ///
+    /// A file that makes the `mcap` reader panic is refused like any malformed file: mcap 0.26's
+    /// `MessageStream` sets no record length limit, and a record length near `u64::MAX`
+    /// overflows its arithmetic (found by the `recording` fuzz target; kept in
+    /// `fuzz/regressions/recording/`).
+    pub fn from_bytes(path: &Path, buf: &[u8]) -> Result<Self> {
+        std::panic::catch_unwind(|| Self::parse(path, buf)).unwrap_or_else(|_| {
+            Err(CliError::BadRecording {
+                path: path.into(),
+                detail: "malformed MCAP (the reader failed on a damaged record)".into(),
+            })
+        })
+    }
+
+    fn parse(path: &Path, buf: &[u8]) -> Result<Self> {
         let stream =
-            mcap::MessageStream::new_with_options(&buf, mcap::read::Options::IgnoreEndMagic.into())
+            mcap::MessageStream::new_with_options(buf, mcap::read::Options::IgnoreEndMagic.into())
                 .map_err(|e| CliError::mcap(path, e))?;
         let mut rec = Recording::default();
         let mut ids: BTreeMap<u16, u16> = BTreeMap::new();
@@ -282,7 +301,7 @@ impl Recording {
                 tick: body.tick,
             });
         }
-        if !rec.truncated && mcap::read::footer(&buf).is_err() {
+        if !rec.truncated && mcap::read::footer(buf).is_err() {
             rec.truncated = true;
         }
         rec.samples.sort_by_key(|s| s.t_ns);

@@ -92,6 +92,34 @@ fn refuse_live_states(
     )))
 }
 
+/// Length of one pass over `rec` (non-empty, `states` states published) in ns: the recording's
+/// span plus one mean sample period, so that a loop's first sample does not land on the
+/// previous pass's last; never 0.
+pub fn pass_ns(rec: &Recording, states: usize) -> u64 {
+    let (Some(first), Some(last)) = (rec.samples.first(), rec.samples.last()) else {
+        return 1_000_000;
+    };
+    let span = last.t_ns - first.t_ns;
+    let per_channel = (rec.samples.len() / states.max(1)).max(2) as u64;
+    // Saturating: a damaged file's times can span nearly all of u64 (found by the `recording`
+    // fuzz target; fuzz/regressions/recording/replay-span-overflows-pass-length).
+    let pass_ns = span.saturating_add(span / (per_channel - 1));
+    if pass_ns > 0 {
+        return pass_ns;
+    }
+    // One instant only (e.g. a single sample): repeat it at the fastest recorded rate.
+    let rate = rec
+        .channels
+        .iter()
+        .map(|c| c.meta.rate_hz)
+        .fold(0.0, f64::max);
+    if rate > 0.0 {
+        ((1e9 / rate) as u64).max(1)
+    } else {
+        1_000_000
+    }
+}
+
 /// Replays until the end (or, with `--loop`, until Ctrl-C).
 pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
     if !(args.rate_scale > 0.0 && args.rate_scale.is_finite()) {
@@ -179,25 +207,7 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
     }
 
     let t_first = rec.samples[0].t_ns;
-    let t_last = rec.samples[rec.samples.len() - 1].t_ns;
-    // One pass lasts the recording's span plus one mean sample period, so that a loop's first
-    // sample does not land on the previous pass's last.
-    let per_channel = (rec.samples.len() / states.max(1)).max(2) as u64;
-    let mut pass_ns = (t_last - t_first) + (t_last - t_first) / (per_channel - 1);
-    if pass_ns == 0 {
-        // One instant only (e.g. a single sample): repeat it at the fastest recorded rate.
-        let rate = rec
-            .channels
-            .iter()
-            .map(|c| c.meta.rate_hz)
-            .fold(0.0, f64::max);
-        pass_ns = if rate > 0.0 {
-            (1e9 / rate) as u64
-        } else {
-            1_000_000
-        }
-        .max(1);
-    }
+    let pass_ns = pass_ns(&rec, states);
     let bar = (!args.no_progress && std::io::stderr().is_terminal()).then(|| {
         let b = ProgressBar::new(rec.samples.len() as u64);
         if let Ok(style) =

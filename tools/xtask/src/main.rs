@@ -11,10 +11,14 @@
 //!   tests boot that image in the rp2040js emulator; tools/cli's `bench` test runs
 //!   `conductor bench --quick`), the f32 build of Score, and the no_std crates built for the
 //!   RP2040's Cortex-M0+.
+//! * `fuzz`  — every fuzz target for a set number of executions and a table of the results
+//!   (see [`fuzz`]; `cargo xtask fuzz --help`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitCode};
 use std::time::Instant;
+
+mod fuzz;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -22,10 +26,12 @@ fn main() -> ExitCode {
     let result = match task {
         "setup" => setup().map(|_| ()),
         "test" => test(),
+        "fuzz" => fuzz::fuzz(&args[1..]),
         _ => {
-            eprintln!("usage: cargo xtask <setup|test>");
+            eprintln!("usage: cargo xtask <setup|test|fuzz>");
             eprintln!("  setup  install the Python venv and other test prerequisites");
             eprintln!("  test   setup, then run the whole test suite");
+            eprintln!("  fuzz   run every fuzz target N times and tabulate (--help)");
             return ExitCode::from(2);
         }
     };

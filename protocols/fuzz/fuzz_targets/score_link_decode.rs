@@ -1,0 +1,3 @@
+//! libFuzzer entry for [`conductor_protocols_fuzz::score_link_decode`].
+#![no_main]
+libfuzzer_sys::fuzz_target!(|input: &[u8]| conductor_protocols_fuzz::score_link_decode(input));

@@ -1,0 +1,121 @@
+//! The fuzz targets' checks (tools/cli/fuzz/src/lib.rs) on their committed corpora: the minimised
+//! corpus a campaign left in `fuzz/seeds/<target>/` and every input that once failed, kept in
+//! `fuzz/regressions/<target>/`. This keeps the checks compiling and the bugs they found fixed
+//! without cargo-fuzz or nightly; `cargo xtask fuzz` runs the real campaigns.
+
+#[allow(dead_code)]
+#[path = "../fuzz/src/lib.rs"]
+mod fuzz;
+
+use std::path::{Path, PathBuf};
+
+fn files(dir: &Path) -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map(|rd| rd.map(|e| e.unwrap().path()).collect())
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+#[test]
+fn every_fuzz_target_passes_its_seed_and_regression_corpora() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz");
+    // The table of checks names exactly the libFuzzer binaries.
+    let mut bins: Vec<String> = files(&root.join("fuzz_targets"))
+        .iter()
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    bins.sort();
+    let mut names: Vec<String> = fuzz::TARGETS.iter().map(|(n, _)| n.to_string()).collect();
+    names.sort();
+    assert_eq!(bins, names, "fuzz_targets/ and TARGETS disagree");
+    for (name, check) in fuzz::TARGETS {
+        let seeds = files(&root.join("seeds").join(name));
+        assert!(!seeds.is_empty(), "{name} has no seed corpus");
+        for path in seeds
+            .iter()
+            .chain(&files(&root.join("regressions").join(name)))
+        {
+            let data = std::fs::read(path).unwrap();
+            let r = std::panic::catch_unwind(|| check(&data));
+            assert!(r.is_ok(), "{name} fails on {}", path.display());
+        }
+    }
+}
+
+/// Small recordings in the documented layout (two states; unchunked, chunked and zstd-chunked),
+/// the starting points of the `recording` target. `UPDATE_FUZZ_SEEDS=1` writes them into
+/// `fuzz/seeds/recording/`; either way each must load with all its samples and pass the check.
+#[test]
+fn synthetic_recordings_load_and_pass_the_recording_check() {
+    use conductor_cli::recording::{self as r, Recording};
+    use std::collections::BTreeMap;
+    let make = |chunked: bool, zstd: bool| -> Vec<u8> {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new()
+            .use_chunks(chunked)
+            .compression(zstd.then_some(mcap::Compression::Zstd))
+            .profile(r::PROFILE)
+            .create(&mut buf)
+            .unwrap();
+        let schema = w
+            .add_schema(r::SCHEMA_NAME, r::SCHEMA_ENCODING, r::SCHEMA.as_bytes())
+            .unwrap();
+        for (n, state) in ["knee", "hip"].into_iter().enumerate() {
+            let md: BTreeMap<String, String> = [
+                ("subsystem", "leg"),
+                ("state", state),
+                ("index", if n == 0 { "0" } else { "1" }),
+                ("units", "rad"),
+                ("writable", "true"),
+                ("rate_hz", "100"),
+                ("min", "-3"),
+                ("max", "3"),
+                ("device", "d1"),
+            ]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect();
+            let ch = w
+                .add_channel(schema, &format!("/leg/{state}"), r::MESSAGE_ENCODING, &md)
+                .unwrap();
+            for i in 0..3u64 {
+                let t = 1_000_000_000 + i * 10_000_000 + n as u64;
+                let value = if i == 2 { "null" } else { "0.5" };
+                let body = format!(
+                    r#"{{"value":{value},"status":{i},"t_sample":{},"seq":{i},"tick":{i}}}"#,
+                    t as f64 * 1e-9
+                );
+                w.write_to_known_channel(
+                    &mcap::records::MessageHeader {
+                        channel_id: ch,
+                        sequence: i as u32,
+                        log_time: t,
+                        publish_time: t,
+                    },
+                    body.as_bytes(),
+                )
+                .unwrap();
+            }
+        }
+        w.finish().unwrap();
+        drop(w);
+        buf.into_inner()
+    };
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds/recording");
+    for (name, chunked, zstd) in [
+        ("plain.mcap", false, false),
+        ("chunked.mcap", true, false),
+        ("zstd.mcap", true, true),
+    ] {
+        let bytes = make(chunked, zstd);
+        let rec = Recording::from_bytes(Path::new(name), &bytes).unwrap();
+        assert_eq!((rec.channels.len(), rec.samples.len()), (2, 6), "{name}");
+        assert!(!rec.truncated, "{name}");
+        fuzz::recording(&bytes);
+        if std::env::var_os("UPDATE_FUZZ_SEEDS").is_some() {
+            std::fs::create_dir_all(&dir).unwrap();
+            std::fs::write(dir.join(name), &bytes).unwrap();
+        }
+    }
+}
