@@ -230,8 +230,10 @@ impl MitMotor {
         true
     }
 
+    /// The step's reply is missing (the frame or its answer lost on the bus): sent again,
+    /// within the step's budget for losses.
     fn retry(&mut self, now_ns: u64) {
-        if !self.life.retry_exhausted(now_ns) {
+        if !self.life.lost_exhausted(now_ns) {
             return;
         }
         match self.life.step {

@@ -314,6 +314,7 @@ impl<T: ControlTable> RegDevice<T> {
             return;
         }
         self.life.base.sent = true;
+        self.life.base.sent_tick = ctx.tick;
         match self.life.base.step {
             Step::None => self.life.base.sent = false,
             Step::Probe => self.push(Op::Ping, ctx, out),
@@ -397,10 +398,23 @@ impl<T: ControlTable> RegDevice<T> {
 
     /// A lifecycle request went unanswered (or was refused): retry, or give up.
     fn retry(&mut self, now_ns: u64) {
-        let l = &mut self.life;
-        if !l.base.retry_exhausted(now_ns) {
+        if !self.life.base.retry_exhausted(now_ns) {
             return;
         }
+        self.give_up(now_ns);
+    }
+
+    /// A lifecycle round was lost to the line (a read missing): sent again, within its budget.
+    fn retry_lost(&mut self, now_ns: u64) {
+        if !self.life.base.lost_exhausted(now_ns) {
+            return;
+        }
+        self.give_up(now_ns);
+    }
+
+    /// The step's tries are used up.
+    fn give_up(&mut self, now_ns: u64) {
+        let l = &mut self.life;
         match l.base.step {
             Step::Probe | Step::ModelRead | Step::ReadConfig => l.base.fail(Failure::NoAnswer),
             Step::WriteConfig => {
@@ -621,7 +635,9 @@ impl<T: ControlTable> RegDevice<T> {
                     .expected()
                     .iter()
                     .any(|e| e.addr == addr && e.len == len && e.got.is_none());
-                if waiting && self.life.base.sent {
+                // A read of an earlier round (given up, then sent again) that comes back
+                // missing now is no news about this round.
+                if waiting && self.life.base.sent && reply.tick >= self.life.base.sent_tick {
                     // One retry per round: the other reads of the round are resent with it.
                     for e in &mut self.life.expect[..self.life.n_expect] {
                         e.got = None;
@@ -629,7 +645,7 @@ impl<T: ControlTable> RegDevice<T> {
                     if self.life.base.step == Step::Safe {
                         self.life.base.sent = false;
                     }
-                    self.retry(now);
+                    self.retry_lost(now);
                 }
             }
             _ => {}
@@ -810,6 +826,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
         if managed {
             self.life.go(Step::Safe);
             self.life.base.sent = true;
+            self.life.base.sent_tick = ctx.tick;
             if !self.life.base.begin_safe() {
                 return;
             }

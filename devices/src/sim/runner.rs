@@ -516,7 +516,22 @@ pub fn run_dxl(
 /// its latency or stall, to within about 0.1 ms), cyclic node messages at least every
 /// millisecond.
 pub fn run_slcan(ep: Endpoint, adapter: SlcanAdapterSim) -> Running<SlcanAdapterSim> {
-    Running::spawn("slcan-sim", ep, adapter, |mut io, sim, _faults, stop| {
+    run_slcan_with_faults(ep, adapter, FaultConfig::default(), FaultConfig::default())
+}
+
+/// [`run_slcan`] with the serial link damaged: `down` on each chunk the host sends, `up` on
+/// each chunk sent to the host (damage on the CAN wire itself is the adapter's:
+/// [`SlcanAdapterSim::set_wire_faults`]).
+pub fn run_slcan_with_faults(
+    ep: Endpoint,
+    adapter: SlcanAdapterSim,
+    down: FaultConfig,
+    up: FaultConfig,
+) -> Running<SlcanAdapterSim> {
+    Running::spawn("slcan-sim", ep, adapter, move |mut io, sim, faults, stop| {
+        let mut down = FaultInjector::new(down);
+        let mut up = FaultInjector::new(up);
+        let mut chunk = Vec::with_capacity(4096);
         let mut buf = vec![0u8; 4096];
         let mut out = Vec::with_capacity(4096);
         while !stop.load(Ordering::Relaxed) {
@@ -534,12 +549,19 @@ pub fn run_slcan(ep: Endpoint, adapter: SlcanAdapterSim) -> Running<SlcanAdapter
             {
                 let mut a = lock(sim);
                 if n > 0 {
-                    a.feed(&buf[..n], t, &mut out);
+                    chunk.clear();
+                    chunk.extend_from_slice(&buf[..n]);
+                    down.apply(&mut chunk);
+                    a.feed(&chunk, t, &mut out);
                 }
                 a.poll(t, &mut out);
             }
             if !out.is_empty() {
+                up.apply(&mut out);
                 io.write(&out);
+            }
+            if n > 0 || !out.is_empty() {
+                *lock(faults) = (down.totals(), up.totals());
             }
         }
     })
