@@ -39,7 +39,7 @@ pub mod manifest;
 pub mod process;
 pub mod rt;
 pub mod schedule;
-pub mod soak;
 pub mod signals;
+pub mod soak;
 pub mod stages;
 pub mod stress;

@@ -538,7 +538,13 @@ impl<T: ControlTable> RegDevice<T> {
             }
             Step::Enable => {
                 if self.life.expected().iter().any(|e| e.got != e.want) {
-                    return self.retry(now_ns);
+                    // Torque still off with no fault reported: the write was lost on the line
+                    // (a latched fault shows in the status packets and is retried as a try).
+                    return if self.life.base.status.fault == 0 {
+                        self.retry_lost(now_ns)
+                    } else {
+                        self.retry(now_ns)
+                    };
                 }
                 let l = &mut self.life;
                 l.torque = Some(true);

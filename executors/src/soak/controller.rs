@@ -43,19 +43,23 @@ pub struct ControllerArgs {
 /// leave, so this goes around it to see what the executor does with them.
 struct RawSender {
     _node: Node<RtIpc>,
-    _service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, CommandFrame, ()>,
+    _service:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, CommandFrame, ()>,
     port: Publisher<RtIpc, CommandFrame, ()>,
 }
 
 impl RawSender {
     fn open(domain: &Domain, subsystem: &str) -> Result<Self, Box<dyn std::error::Error>> {
-        let name: NodeName = format!("soak-raw-{}", std::process::id()).as_str().try_into()?;
+        let name: NodeName = format!("soak-raw-{}", std::process::id())
+            .as_str()
+            .try_into()?;
         let node = NodeBuilder::new()
             .name(&name)
             .config(domain.iceoryx2_config())
             .create::<RtIpc>()?;
-        let service_name: ServiceName =
-            conductor_bus::naming::commands(subsystem).as_str().try_into()?;
+        let service_name: ServiceName = conductor_bus::naming::commands(subsystem)
+            .as_str()
+            .try_into()?;
         let service = node
             .service_builder(&service_name)
             .publish_subscribe::<CommandFrame>()
@@ -91,7 +95,10 @@ pub fn run(args: &ControllerArgs) -> Result<(), Box<dyn std::error::Error>> {
     let f2 = flood_until.clone();
     std::thread::spawn(move || {
         for line in std::io::stdin().lock().lines().map_while(Result::ok) {
-            if let Some(ms) = line.strip_prefix("flood ").and_then(|m| m.trim().parse::<u64>().ok()) {
+            if let Some(ms) = line
+                .strip_prefix("flood ")
+                .and_then(|m| m.trim().parse::<u64>().ok())
+            {
                 f2.store(monotonic_ns() + ms * 1_000_000, Ordering::Relaxed);
             }
         }

@@ -88,14 +88,16 @@ impl Ctl {
         let mut cmd = Command::new(prog);
         cmd.args(pre)
             .args(["--domain", domain, "--subsystem", &robot.subsystem])
-            .args(["--rate-hz", &o.rate_hz.to_string(), "--seed", &seed.to_string()]);
+            .args([
+                "--rate-hz",
+                &o.rate_hz.to_string(),
+                "--seed",
+                &seed.to_string(),
+            ]);
         for j in &robot.joints {
             cmd.args(["--joint", &j.to_arg()]);
         }
-        let mut child = cmd
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()?;
+        let mut child = cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).spawn()?;
         let stdin = child.stdin.take().expect("piped");
         let out = child.stdout.take().expect("piped");
         let (tx, lines) = channel();
@@ -178,8 +180,11 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
     let dxl = Robot::dynamixel(&dxl_link, o.corrupt, o.drop, o.seed).map_err(io)?;
     let can = Robot::mit_slcan(&can_link, o.corrupt, o.drop, o.seed ^ 0xCA).map_err(io)?;
     let manifest = dir.join("soak.toml");
-    std::fs::write(&manifest, rig::manifest(&o.root, &dxl_link, &can_link).map_err(io)?)
-        .map_err(io)?;
+    std::fs::write(
+        &manifest,
+        rig::manifest(&o.root, &dxl_link, &can_link).map_err(io)?,
+    )
+    .map_err(io)?;
     let domain = Domain::unique("soak").map_err(|e| e.to_string())?;
     let launch = Launch::start(
         &manifest,
@@ -229,7 +234,9 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
     };
     let outcome = c.campaign();
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
-    let monitor = eyes.join().map_err(|_| "the monitor panicked".to_string())?;
+    let monitor = eyes
+        .join()
+        .map_err(|_| "the monitor panicked".to_string())?;
     if let Err(e) = monitor {
         c.failures.push(format!("monitor: {e}"));
     }
@@ -292,7 +299,7 @@ impl Campaign<'_> {
             }
         }
         let shm = procs::shm_entries(&self.domain.prefix(), &self.domain.root_path());
-        
+
         self.resources.shm(t, shm, last);
     }
 
@@ -327,6 +334,11 @@ impl Campaign<'_> {
 
     fn event(&mut self, m: usize, f: Fault) -> Result<(), String> {
         let name = self.members[m].robot.subsystem.clone();
+        eprintln!(
+            "soak: at {:.3} s: {name}: {}",
+            monotonic_ns() as f64 / 1e9,
+            f.name()
+        );
         let recovery = match f {
             Fault::Unplug => self.unplug(m),
             Fault::ExecutorKill => self.kill_executor(m),
@@ -395,10 +407,23 @@ impl Campaign<'_> {
     /// controller enables the robot again; the recovery is the time until it commands again.
     fn controller_dies(&mut self, m: usize, stall: bool) -> Result<u64, String> {
         let r = self.members[m].robot.clone();
+        // A controller that never commanded leaves no watchdog to fire: first see its frames
+        // applied.
+        let frames0 = lock(&self.members[m].watched).counted().frames_applied;
+        let until = Instant::now() + Duration::from_secs(5);
+        while lock(&self.members[m].watched).counted().frames_applied <= frames0 {
+            if Instant::now() > until {
+                return Err("its controller's frames are not applied".into());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
         let ctl = self.members[m].ctl.take().ok_or("no controller")?;
         let (down0, trips0, tripped0) = {
             let w = lock(&self.members[m].watched);
-            let tripped = w.flags.iter().all(|f| f & conductor_bus::status::TRIPPED != 0);
+            let tripped = w
+                .flags
+                .iter()
+                .all(|f| f & conductor_bus::status::TRIPPED != 0);
             (w.injected_down, w.counted().watchdog_trips, tripped)
         };
         let t = monotonic_ns();
@@ -414,7 +439,8 @@ impl Campaign<'_> {
             w.safe_ns = None;
             w.hold_from_ns = None;
         }
-        let wait_until = Instant::now() + Duration::from_nanos(r.watchdog_ns) + Duration::from_secs(3);
+        let wait_until =
+            Instant::now() + Duration::from_nanos(r.watchdog_ns) + Duration::from_secs(3);
         let safe = loop {
             let s = lock(&self.members[m].watched).safe_ns;
             if s.is_some() || Instant::now() > wait_until {
@@ -437,7 +463,9 @@ impl Campaign<'_> {
             }
             Some(s) => {
                 let took = s - t;
-                self.members[m].tally.safe(took, r.watchdog_ns + r.tick_ns, took <= limit);
+                self.members[m]
+                    .tally
+                    .safe(took, r.watchdog_ns + r.tick_ns, took <= limit);
                 if took > limit {
                     result = Err(format!(
                         "safe state after {:.1} ms (limit {:.1} ms: watchdog, 2 ticks, the worst tick lateness, 2 ms, {} lost requests)",
@@ -517,7 +545,8 @@ impl Campaign<'_> {
             robots.push(m.tally.report(&m.robot, &w, restarts));
         }
         if let Err(e) = stopped {
-            self.failures.push(format!("the launch did not stop cleanly: {e}"));
+            self.failures
+                .push(format!("the launch did not stop cleanly: {e}"));
         }
         Report::new(
             self.o,

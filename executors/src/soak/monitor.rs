@@ -18,7 +18,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
-use conductor_bus::{monotonic_ns, status, Bus, Domain, ExecutorStats, StateSample, StateSubscriber, StatsSubscriber};
+use conductor_bus::{
+    monotonic_ns, status, Bus, Domain, ExecutorStats, StateSample, StateSubscriber, StatsSubscriber,
+};
 use conductor_devices::protocol::mit_limits;
 use conductor_protocols::mit_can::{decode_command, MotorCommand};
 use embedded_can::Frame;
@@ -29,6 +31,8 @@ use super::rig::{DeviceTruth, Robot, Sim, PULSE};
 const HISTORY_NS: u64 = 3_000_000_000;
 /// How far from where a joint is a command may be and still count as holding it there (rad).
 const HOLD_TOLERANCE: f64 = 0.02;
+/// The longest gap between two polls of the simulator a published value is judged across.
+const GAP_NS: u64 = 5_000_000;
 /// Examples of each kind of failure kept for the report.
 const EXAMPLES: usize = 5;
 
@@ -108,8 +112,15 @@ pub struct Watched {
     pub samples_checked: u64,
     /// Samples flagged `STALE` (not checked: the executor says it has no fresh value).
     pub samples_stale: u64,
-    /// Samples too old for the history (the monitor fell behind): not checked.
+    /// Samples the monitor could not judge: too old for its history, or (when not matching)
+    /// from a time it did not poll the simulator for more than 5 ms (it did not get the CPU).
     pub samples_unchecked: u64,
+    /// Samples whose value the device had, but earlier than their sample time, when the
+    /// simulator's thread had been starved of CPU and sent its reply that much late (the
+    /// executor cannot tell such a reply from a timely one; a real device is not late).
+    pub samples_misdated: u64,
+    /// The largest lateness of the simulator accepted for a misdated sample (ms).
+    pub worst_sim_lag_ms: f64,
     /// Published values that were wrong (not a position the device had, not finite, fresh
     /// while the bus was unplugged).
     pub wrong_published: u64,
@@ -157,7 +168,9 @@ pub struct Watched {
 impl Watched {
     fn example(&mut self, text: String) {
         if self.examples.len() < EXAMPLES * 4 {
-            self.examples.push(text);
+            let t = monotonic_ns() as f64 / 1e9;
+            eprintln!("soak: at {t:.3} s: {text}");
+            self.examples.push(format!("at {t:.3} s: {text}"));
         }
     }
 
@@ -185,6 +198,8 @@ struct Eye {
     history: VecDeque<(u64, Vec<DeviceTruth>)>,
     /// (time, damaged packets towards the host so far).
     injected: VecDeque<(u64, u64)>,
+    /// (time, the longest the simulator overslept since the previous poll).
+    lags: VecDeque<(u64, u64)>,
     pending: VecDeque<(usize, StateSample)>,
     pending_stats: VecDeque<ExecutorStats>,
     /// Of the running incarnation: (ticks of its last stats, bus errors and injected at its
@@ -246,6 +261,7 @@ fn run(
             stats,
             history: VecDeque::new(),
             injected: VecDeque::new(),
+            lags: VecDeque::new(),
             pending: VecDeque::new(),
             pending_stats: VecDeque::new(),
             incarnation: None,
@@ -287,6 +303,13 @@ impl Eye {
             w.can_frames_lost = lost_down + lost_up;
         }
         self.history.push_back((now, self.truth.clone()));
+        let lag = self.robot.take_lag_ns();
+        if lag > 0 {
+            self.lags.push_back((now, lag));
+        }
+        while self.lags.front().is_some_and(|(t, _)| now - t > HISTORY_NS) {
+            self.lags.pop_front();
+        }
         self.injected.push_back((now, injected_up));
         while self
             .history
@@ -331,12 +354,13 @@ impl Eye {
         Ok(())
     }
 
-    /// The truth entries around `[from, to]`: those inside and the one on each side.
+    /// The truth entries around `[from, to]`: those inside and two on each side (a poll sees
+    /// the simulator as it last advanced, up to a millisecond before).
     fn around(&self, from: u64, to: u64) -> impl Iterator<Item = &(u64, Vec<DeviceTruth>)> {
         let start = self.history.partition_point(|(t, _)| *t < from);
         let end = self.history.partition_point(|(t, _)| *t <= to);
         self.history
-            .range(start.saturating_sub(1)..(end + 1).min(self.history.len()))
+            .range(start.saturating_sub(2)..(end + 2).min(self.history.len()))
     }
 
     fn check_sample(&mut self, i: usize, s: &StateSample) {
@@ -349,7 +373,10 @@ impl Eye {
         let name = &self.robot.joints[i].name;
         if !s.value.is_finite() {
             w.wrong_published += 1;
-            w.example(format!("{name}: published {} at {}", s.value, s.t_sample_ns));
+            w.example(format!(
+                "{name}: published {} at {}",
+                s.value, s.t_sample_ns
+            ));
             return;
         }
         if let Some(&(from, _)) = w
@@ -366,11 +393,7 @@ impl Eye {
             return;
         }
         w.fresh_ns[i] = w.fresh_ns[i].max(s.t_sample_ns);
-        if self
-            .history
-            .front()
-            .is_none_or(|(t, _)| *t > s.t_sample_ns)
-        {
+        if self.history.front().is_none_or(|(t, _)| *t > s.t_sample_ns) {
             w.samples_unchecked += 1;
             return;
         }
@@ -378,13 +401,52 @@ impl Eye {
         // The reply was made after the request left (its sample time) and read before the
         // value was published: the device had the value somewhere in between.
         let to = s.t_publish_ns.max(s.t_sample_ns) + 1_000_000;
-        for (_, truth) in self.around(s.t_sample_ns.saturating_sub(1_000_000), to) {
-            lo = lo.min(truth[i].position);
-            hi = hi.max(truth[i].position);
+        // Between two polls the joint moves (and may turn round): as far as the largest
+        // step seen between neighbouring polls; a gap longer than GAP_NS (the monitor did not
+        // get the CPU) leaves the value unchecked rather than judged.
+        let (mut step, mut gap, mut prev) = (0.0f64, 0u64, None::<(u64, f64)>);
+        for (t, truth) in self.around(s.t_sample_ns.saturating_sub(1_000_000), to) {
+            let p = truth[i].position;
+            lo = lo.min(p);
+            hi = hi.max(p);
+            if let Some((t0, p0)) = prev {
+                step = step.max((p - p0).abs());
+                gap = gap.max(t - t0);
+            }
+            prev = Some((*t, p));
         }
-        let tol = 1.5 * self.robot.resolution;
+        let tol = 1.5 * self.robot.resolution + step;
         w.samples_checked += 1;
-        if s.value < lo - tol || s.value > hi + tol {
+        let inside = |lo: f64, hi: f64| s.value >= lo - tol && s.value <= hi + tol;
+        if inside(lo, hi) {
+            return;
+        }
+        // The simulator's thread overslept around then: its reply may have left that much
+        // late, carrying the position of its instruction's arrival.
+        let lag = self
+            .lags
+            .iter()
+            .filter(|(t, _)| *t + 200_000_000 >= s.t_sample_ns && *t <= to + self.after_ns)
+            .map(|x| x.1)
+            .max()
+            .unwrap_or(0);
+        if lag > 0 {
+            let (mut lo2, mut hi2) = (lo, hi);
+            for (_, truth) in self.around(s.t_sample_ns.saturating_sub(1_000_000 + lag), to) {
+                lo2 = lo2.min(truth[i].position);
+                hi2 = hi2.max(truth[i].position);
+            }
+            if inside(lo2, hi2) {
+                w.samples_misdated += 1;
+                w.worst_sim_lag_ms = w.worst_sim_lag_ms.max(lag as f64 / 1e6);
+                return;
+            }
+        }
+        if gap > GAP_NS {
+            w.samples_unchecked += 1;
+            return;
+        }
+        {
             w.wrong_published += 1;
             w.example(format!(
                 "{name}: published {:.5} (tick {}, flags {:#x}) but the device was in [{lo:.5}, {hi:.5}] from its sample time to its publication",
@@ -452,7 +514,10 @@ impl Eye {
                                 || (c.t as f64).abs() > q(limits.t, 12);
                             if bad {
                                 w.wrong_written += 1;
-                                w.example(format!("{}: commanded {c:?}, limits [{}, {}]", j.name, j.min, j.max));
+                                w.example(format!(
+                                    "{}: commanded {c:?}, limits [{}, {}]",
+                                    j.name, j.min, j.max
+                                ));
                             }
                         }
                         Err(e) => {
@@ -508,7 +573,11 @@ impl Eye {
         }
         if let Some(why) = why {
             w.unsafe_events += 1;
-            w.example(format!("{}: {why} {} ms after its controller died", self.robot.subsystem, (now - armed) / 1_000_000));
+            w.example(format!(
+                "{}: {why} {} ms after its controller died",
+                self.robot.subsystem,
+                (now - armed) / 1_000_000
+            ));
             // One event per episode.
             w.hold_from_ns = None;
         }

@@ -159,6 +159,8 @@ impl Tally {
             samples_checked: w.samples_checked,
             samples_stale: w.samples_stale,
             samples_unchecked: w.samples_unchecked,
+            samples_misdated: w.samples_misdated,
+            worst_sim_lag_ms: w.worst_sim_lag_ms,
             writes_checked: w.writes_checked,
             wrong_published: w.wrong_published,
             wrong_written: w.wrong_written,
@@ -209,6 +211,11 @@ pub struct RobotReport {
     pub samples_stale: u64,
     /// Published samples the monitor could not check (it fell behind).
     pub samples_unchecked: u64,
+    /// Right values with a sample time too late by the simulator's own lateness (its thread
+    /// starved of CPU): see `Watched::samples_misdated`.
+    pub samples_misdated: u64,
+    /// The largest simulator lateness behind a misdated sample (ms).
+    pub worst_sim_lag_ms: f64,
     /// Values received by devices that were checked.
     pub writes_checked: u64,
     /// Wrong values published.
@@ -242,12 +249,35 @@ pub struct RobotReport {
 pub struct ProcUsage {
     /// Process id.
     pub pid: u32,
-    /// First sample time (s since start), RSS (KiB), descriptors.
-    pub first: (f64, u64, u64),
-    /// Sample after the warm-up.
-    pub base: Option<(f64, u64, u64)>,
-    /// Last sample.
-    pub last: (f64, u64, u64),
+    /// Samples: (s since the campaign started, RSS KiB, open descriptors).
+    pub samples: Vec<(f64, u64, u64)>,
+}
+
+/// Whether what a series holds grows: its last value against the most it held in the first
+/// half of its life after the warm-up (a leak adds with every fault, so the second half ends
+/// above the first half's envelope; the churn of processes coming and going does not).
+/// `None` when too few samples were taken after the warm-up to say.
+fn grows(samples: &[(f64, u64, u64)], warmup: f64, slack: (u64, u64)) -> Option<(bool, String)> {
+    let start = samples.first()?.0 + warmup;
+    let after: Vec<_> = samples.iter().filter(|s| s.0 >= start).collect();
+    if after.len() < 4 {
+        return None;
+    }
+    let mid = (after[0].0 + after[after.len() - 1].0) / 2.0;
+    let first: Vec<_> = after.iter().filter(|s| s.0 <= mid).collect();
+    let env = (
+        first.iter().map(|s| s.1).max()?,
+        first.iter().map(|s| s.2).max()?,
+    );
+    let last = after[after.len() - 1];
+    let ok = last.1 <= env.0 + slack.0 && last.2 <= env.1 + slack.1;
+    Some((
+        !ok,
+        format!(
+            "at most {} and {} in {:.0}–{:.0} s, {} and {} at {:.0} s",
+            env.0, env.1, after[0].0, mid, last.1, last.2, last.0
+        ),
+    ))
 }
 
 /// What the processes and the domain held over time.
@@ -255,19 +285,15 @@ pub struct ProcUsage {
 pub struct Resources {
     /// Per process name, per pid.
     pub processes: BTreeMap<String, Vec<ProcUsage>>,
-    /// Domain entries (shm files and node/service records) after the warm-up.
-    pub shm_base: Option<(f64, u64)>,
-    /// The most seen.
-    pub shm_max: u64,
-    /// At the end.
-    pub shm_last: Option<(f64, u64)>,
+    /// The domain's entries (shm files, node and service records): (s, count, 0).
+    pub shm: Vec<(f64, u64, u64)>,
     /// Entries at the end that were not there after the warm-up (at most 20).
     pub shm_new: Vec<String>,
     #[serde(skip)]
     shm_base_names: Vec<String>,
 }
 
-/// Seconds a process (or the campaign) runs before its base sample.
+/// Seconds a process (or the campaign) runs before its samples count.
 const WARMUP_S: f64 = 5.0;
 
 impl Resources {
@@ -277,28 +303,19 @@ impl Resources {
         if v.last().is_none_or(|u| u.pid != pid) {
             v.push(ProcUsage {
                 pid,
-                first: (t, rss, fds),
-                base: None,
-                last: (t, rss, fds),
+                samples: Vec::new(),
             });
         }
-        let u = v.last_mut().expect("pushed");
-        u.last = (t, rss, fds);
-        if u.base.is_none() && t - u.first.0 >= WARMUP_S {
-            u.base = Some((t, rss, fds));
-        }
+        v.last_mut().expect("pushed").samples.push((t, rss, fds));
     }
 
     /// A sample of the domain's entries (`last`: the end of the run).
     pub fn shm(&mut self, t: f64, names: Vec<String>, last: bool) {
-        let n = names.len() as u64;
-        self.shm_max = self.shm_max.max(n);
-        if self.shm_base.is_none() && t >= 2.0 * WARMUP_S {
-            self.shm_base = Some((t, n));
+        if self.shm_base_names.is_empty() && t >= 2.0 * WARMUP_S {
             self.shm_base_names = names.clone();
         }
+        self.shm.push((t, names.len() as u64, 0));
         if last {
-            self.shm_last = Some((t, n));
             self.shm_new = names
                 .into_iter()
                 .filter(|x| self.shm_base_names.binary_search(x).is_err())
@@ -357,16 +374,18 @@ impl Report {
         failures: Vec<String>,
     ) -> Self {
         let mut checks = Vec::new();
-        let mut check = |name: String, ok: bool, detail: String| {
-            checks.push(Check { name, ok, detail })
-        };
+        let mut check =
+            |name: String, ok: bool, detail: String| checks.push(Check { name, ok, detail });
         for r in &robots {
             let s = &r.subsystem;
             let inj = |f| r.faults.get(&f).map_or(0, |k| k.injected);
             check(
                 format!("{s}: no wrong value published"),
                 r.wrong_published == 0 && r.samples_checked > 0,
-                format!("{} wrong of {} checked ({} stale)", r.wrong_published, r.samples_checked, r.samples_stale),
+                format!(
+                    "{} wrong of {} checked ({} stale)",
+                    r.wrong_published, r.samples_checked, r.samples_stale
+                ),
             );
             check(
                 format!("{s}: no wrong value written to a device"),
@@ -385,7 +404,11 @@ impl Report {
             check(
                 format!("{s}: every unplug counted as a bus outage"),
                 r.counted.bus_outages == inj(Fault::Unplug),
-                format!("{} unplugs, {} outages counted", inj(Fault::Unplug), r.counted.bus_outages),
+                format!(
+                    "{} unplugs, {} outages counted",
+                    inj(Fault::Unplug),
+                    r.counted.bus_outages
+                ),
             );
             check(
                 format!("{s}: every controller death counted as a watchdog trip"),
@@ -398,22 +421,37 @@ impl Report {
             check(
                 format!("{s}: every executor kill restarted, and nothing else"),
                 r.restarts == inj(Fault::ExecutorKill),
-                format!("{} kills, {} restarts", inj(Fault::ExecutorKill), r.restarts),
+                format!(
+                    "{} kills, {} restarts",
+                    inj(Fault::ExecutorKill),
+                    r.restarts
+                ),
             );
             check(
                 format!("{s}: every damaged packet towards the host counted as a bus error"),
                 r.worst_uncounted <= 0 && r.counted.bus_errors >= inj(Fault::ByteFaults).min(1),
                 format!(
                     "{} damaged, {} bus errors; worst uncounted within an incarnation {}",
-                    inj(Fault::ByteFaults), r.counted.bus_errors, r.worst_uncounted
+                    inj(Fault::ByteFaults),
+                    r.counted.bus_errors,
+                    r.worst_uncounted
                 ),
             );
             check(
                 format!("{s}: bad setpoints rejected or clamped"),
                 r.counted.setpoints_rejected + r.counted.setpoints_clamped > 0,
-                format!("{} rejected, {} clamped", r.counted.setpoints_rejected, r.counted.setpoints_clamped),
+                format!(
+                    "{} rejected, {} clamped",
+                    r.counted.setpoints_rejected, r.counted.setpoints_clamped
+                ),
             );
-            for f in [Fault::Unplug, Fault::ExecutorKill, Fault::ControllerKill, Fault::ControllerStall, Fault::Flood] {
+            for f in [
+                Fault::Unplug,
+                Fault::ExecutorKill,
+                Fault::ControllerKill,
+                Fault::ControllerStall,
+                Fault::Flood,
+            ] {
                 let k = r.faults.get(&f).cloned().unwrap_or_default();
                 check(
                     format!("{s}: {} injected and recovered from", f.name()),
@@ -424,23 +462,24 @@ impl Report {
         }
         for (name, v) in &resources.processes {
             for u in v {
-                let Some(base) = u.base else { continue };
-                let ok = u.last.1 <= base.1 + RSS_SLACK_KIB && u.last.2 <= base.2;
+                let Some((grew, detail)) = grows(&u.samples, WARMUP_S, (RSS_SLACK_KIB, 0)) else {
+                    continue;
+                };
                 check(
                     format!("{name} (pid {}): memory and descriptors do not grow", u.pid),
-                    ok,
-                    format!(
-                        "RSS {} → {} KiB, fds {} → {} from {:.0} s to {:.0} s",
-                        base.1, u.last.1, base.2, u.last.2, base.0, u.last.0
-                    ),
+                    !grew,
+                    format!("RSS KiB and descriptors: {detail}"),
                 );
             }
         }
-        if let (Some(base), Some(last)) = (resources.shm_base, resources.shm_last) {
+        if let Some((grew, detail)) = grows(&resources.shm, 2.0 * WARMUP_S, (0, 0)) {
             check(
                 "the domain's shared memory does not grow".into(),
-                last.1 <= base.1,
-                format!("{} entries at {:.0} s, {} at the end (most {})", base.1, base.0, last.1, resources.shm_max),
+                !grew,
+                format!(
+                    "entries: {detail} (new since the warm-up: {:?})",
+                    resources.shm_new
+                ),
             );
         }
         let passed = checks.iter().all(|c| c.ok) && failures.is_empty();
@@ -490,7 +529,13 @@ impl Report {
                 let _ = writeln!(
                     t,
                     "{:<11} {:<20} {:>10} {:>12} {:>10} {:>14} {:>12}",
-                    r.subsystem, f.name(), k.injected, counted, rec, worst, mean
+                    r.subsystem,
+                    f.name(),
+                    k.injected,
+                    counted,
+                    rec,
+                    worst,
+                    mean
                 );
             }
             let _ = writeln!(
@@ -505,11 +550,13 @@ impl Report {
             );
             let _ = writeln!(
                 t,
-                "{:<11} wrong values published: {} of {} checked ({} stale); written to devices: {} of {} checked",
+                "{:<11} wrong values published: {} of {} checked ({} stale, {} dated late by a starved simulator, worst {:.1} ms); written to devices: {} of {} checked",
                 r.subsystem,
                 r.wrong_published,
                 r.samples_checked,
                 r.samples_stale,
+                r.samples_misdated,
+                r.worst_sim_lag_ms,
                 r.wrong_written,
                 r.writes_checked
             );

@@ -214,6 +214,15 @@ impl Robot {
         }
     }
 
+    /// The longest the simulator's thread woke up late since the last call (ns): its replies
+    /// left that much late.
+    pub fn take_lag_ns(&self) -> u64 {
+        match &self.sim {
+            Sim::Dxl(r) => r.take_lag_ns(),
+            Sim::Slcan(r) => r.take_lag_ns(),
+        }
+    }
+
     /// Pulls the adapter out.
     pub fn unplug(&self) {
         match &self.sim {
