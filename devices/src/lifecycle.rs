@@ -196,6 +196,8 @@ pub(crate) const STEP_TRIES: u8 = 10;
 /// tries: on a noisy bus a round of bundled requests is lost often, which says nothing about
 /// the device.
 pub(crate) const LOST_ROUNDS: u8 = 60;
+/// How long a lifecycle round may go without any answer before it counts as lost (ns).
+pub(crate) const ROUND_TIMEOUT_NS: u64 = 250_000_000;
 /// A safe action not yet confirmed is sent again this often (ns), until it is confirmed or
 /// the executor stops waiting.
 pub(crate) const SAFE_RETRY_NS: u64 = 20_000_000;
@@ -281,6 +283,10 @@ pub(crate) struct Lifecycle<S> {
     /// The tick they went out in: a reply to an older request (a round given up and sent
     /// again) says nothing about this round.
     pub(crate) sent_tick: u64,
+    /// When they went out (ns): a round that got neither an answer nor a `Missing` by
+    /// [`ROUND_TIMEOUT_NS`] later is lost (a request the link dropped unsent, or superseded
+    /// by a newer one for the same device, is answered by nothing).
+    pub(crate) sent_ns: u64,
     pub(crate) tries: u8,
     /// Rounds of the step lost to the line (see [`LOST_ROUNDS`]).
     pub(crate) lost: u8,
@@ -300,6 +306,7 @@ impl<S: LifeStep> Lifecycle<S> {
             step: S::NONE,
             sent: false,
             sent_tick: 0,
+            sent_ns: 0,
             tries: 0,
             lost: 0,
             next_try_ns: 0,
@@ -317,6 +324,19 @@ impl<S: LifeStep> Lifecycle<S> {
         self.sent = false;
         self.tries = 0;
         self.lost = 0;
+    }
+
+    /// Marks the step's requests as sent now.
+    pub(crate) fn mark_sent(&mut self, tick: u64, now_ns: u64) {
+        self.sent = true;
+        self.sent_tick = tick;
+        self.sent_ns = now_ns;
+    }
+
+    /// Whether the round out since [`mark_sent`](Self::mark_sent) has had no answer for
+    /// [`ROUND_TIMEOUT_NS`].
+    pub(crate) fn round_overdue(&self, now_ns: u64) -> bool {
+        self.sent && self.step != S::NONE && now_ns >= self.sent_ns + ROUND_TIMEOUT_NS
     }
 
     /// The step's round was lost to the line (a reply missing): sent again at once while

@@ -193,6 +193,10 @@ impl MitMotor {
 
     /// Lifecycle requests of this tick; true if a frame went out.
     fn drive(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) -> bool {
+        if self.managed() && self.life.round_overdue(ctx.now_ns) {
+            // Neither its answer nor word of it missing came: lost (sent again below).
+            self.retry(ctx.now_ns);
+        }
         if !self.managed() || self.life.sent || ctx.now_ns < self.life.next_try_ns {
             return false;
         }
@@ -225,7 +229,7 @@ impl MitMotor {
                 self.push(op, ctx, out);
             }
         }
-        self.life.sent = true;
+        self.life.mark_sent(ctx.tick, ctx.now_ns);
         self.dirty = false;
         true
     }
@@ -523,7 +527,7 @@ impl Device for MitMotor {
         self.push(op, ctx, out);
         if managed {
             self.awaiting = Some(op);
-            self.life.sent = true;
+            self.life.mark_sent(ctx.tick, ctx.now_ns);
             if matches!(op, Op::Mit { .. }) {
                 self.safe_cmd = Some(op);
                 self.life.status.phase = Phase::Holding;

@@ -310,11 +310,17 @@ impl<T: ControlTable> RegDevice<T> {
                 }
             }
         }
+        if self.life.managed() && self.life.base.round_overdue(ctx.now_ns) {
+            // Neither its answers nor word of them missing came: lost (sent again below).
+            for e in &mut self.life.expect[..self.life.n_expect] {
+                e.got = None;
+            }
+            self.retry_lost(ctx.now_ns);
+        }
         if self.life.base.sent || ctx.now_ns < self.life.base.next_try_ns {
             return;
         }
-        self.life.base.sent = true;
-        self.life.base.sent_tick = ctx.tick;
+        self.life.base.mark_sent(ctx.tick, ctx.now_ns);
         match self.life.base.step {
             Step::None => self.life.base.sent = false,
             Step::Probe => self.push(Op::Ping, ctx, out),
@@ -831,8 +837,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
         let managed = self.life.managed();
         if managed {
             self.life.go(Step::Safe);
-            self.life.base.sent = true;
-            self.life.base.sent_tick = ctx.tick;
+            self.life.base.mark_sent(ctx.tick, ctx.now_ns);
             if !self.life.base.begin_safe() {
                 return;
             }

@@ -186,6 +186,25 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
     )
     .map_err(io)?;
     let domain = Domain::unique("soak").map_err(|e| e.to_string())?;
+    let members: Vec<Member> = [dxl, can]
+        .into_iter()
+        .map(|r| Member {
+            tally: report::Tally::new(&r),
+            robot: Arc::new(r),
+            watched: Arc::new(Mutex::new(Watched::default())),
+            ctl: None,
+        })
+        .collect();
+    // Watching starts before the launch: bring-up writes to the devices too.
+    let stop = Arc::new(AtomicBool::new(false));
+    let eyes = monitor::spawn(
+        domain.clone(),
+        members
+            .iter()
+            .map(|m| (m.robot.clone(), m.watched.clone()))
+            .collect(),
+        stop.clone(),
+    );
     let launch = Launch::start(
         &manifest,
         LaunchOptions {
@@ -201,26 +220,15 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
             max_restarts: 50,
             ..LaunchOptions::default()
         },
-    )
-    .map_err(|e| format!("launch: {e}"))?;
-    let members: Vec<Member> = [dxl, can]
-        .into_iter()
-        .map(|r| Member {
-            tally: report::Tally::new(&r),
-            robot: Arc::new(r),
-            watched: Arc::new(Mutex::new(Watched::default())),
-            ctl: None,
-        })
-        .collect();
-    let stop = Arc::new(AtomicBool::new(false));
-    let eyes = monitor::spawn(
-        domain.clone(),
-        members
-            .iter()
-            .map(|m| (m.robot.clone(), m.watched.clone()))
-            .collect(),
-        stop.clone(),
     );
+    let launch = match launch {
+        Ok(l) => l,
+        Err(e) => {
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            let _ = eyes.join();
+            return Err(format!("launch: {e}"));
+        }
+    };
     let mut c = Campaign {
         o,
         launch,

@@ -193,7 +193,8 @@ struct Eye {
     robot: Arc<Robot>,
     shared: Arc<Mutex<Watched>>,
     subs: Vec<StateSubscriber>,
-    stats: StatsSubscriber,
+    /// Set once the executor's services exist (with the states).
+    stats: Option<StatsSubscriber>,
     /// (time, truth per joint).
     history: VecDeque<(u64, Vec<DeviceTruth>)>,
     /// (time, damaged packets towards the host so far).
@@ -235,20 +236,11 @@ fn run(
     let bus = Bus::open(&domain, "soak-monitor")?;
     let mut eyes = Vec::new();
     for (robot, shared) in robots {
-        let mut subs = Vec::new();
-        for j in &robot.joints {
-            subs.push(StateSubscriber::with_buffer(
-                &bus,
-                &format!("{}/{}", robot.subsystem, j.name),
-                1024,
-            )?);
-        }
         {
             let mut w = lock(&shared);
             w.fresh_ns = vec![0; robot.joints.len()];
             w.flags = vec![0; robot.joints.len()];
         }
-        let stats = StatsSubscriber::new(&bus, &robot.subsystem)?;
         let (after_ns, timeout_ns) = match robot.sim {
             Sim::Dxl(_) => (2_000_000, 2_000_000),
             Sim::Slcan(_) => (2_000_000, 1_500_000),
@@ -257,8 +249,8 @@ fn run(
             count_slack_ns: 3 * robot.tick_ns + timeout_ns + 2_000_000,
             robot,
             shared,
-            subs,
-            stats,
+            subs: Vec::new(),
+            stats: None,
             history: VecDeque::new(),
             injected: VecDeque::new(),
             lags: VecDeque::new(),
@@ -271,9 +263,19 @@ fn run(
             after_ns,
         });
     }
+    // The simulators are watched from before the launch (bring-up writes to the devices
+    // too); the states and stats are subscribed to as soon as their executor offers them.
+    let mut next_connect = 0;
     while !stop.load(Ordering::Relaxed) {
+        let now = monotonic_ns();
         for e in eyes.iter_mut() {
+            if e.stats.is_none() && now >= next_connect {
+                e.connect(&bus);
+            }
             e.poll()?;
+        }
+        if now >= next_connect {
+            next_connect = now + 50_000_000;
         }
         std::thread::sleep(Duration::from_millis(1));
     }
@@ -281,6 +283,23 @@ fn run(
 }
 
 impl Eye {
+    /// Subscribes to the robot's states and stats, if its executor offers them yet.
+    fn connect(&mut self, bus: &Bus) {
+        let sub = &self.robot.subsystem;
+        let Ok(stats) = StatsSubscriber::new(bus, sub) else {
+            return;
+        };
+        let mut subs = Vec::new();
+        for j in &self.robot.joints {
+            match StateSubscriber::with_buffer(bus, &format!("{sub}/{}", j.name), 1024) {
+                Ok(s) => subs.push(s),
+                Err(_) => return,
+            }
+        }
+        self.subs = subs;
+        self.stats = Some(stats);
+    }
+
     fn poll(&mut self) -> Result<(), conductor_bus::BusError> {
         let now = monotonic_ns();
         self.robot.truth(&mut self.truth);
@@ -338,10 +357,14 @@ impl Eye {
             self.pending.pop_front();
             self.check_sample(i, &s);
         }
-        while let Some(s) = self.stats.latest()? {
+        if let Some(s) = self
+            .stats
+            .as_mut()
+            .map(|s| s.latest())
+            .transpose()?
+            .flatten()
+        {
             self.pending_stats.push_back(s);
-            // `latest` drains: one per call is all there is.
-            break;
         }
         while let Some(s) = self.pending_stats.front() {
             if s.t_ns + self.count_slack_ns > now {
