@@ -556,6 +556,16 @@ impl Campaign<'_> {
             self.failures
                 .push(format!("the launch did not stop cleanly: {e}"));
         }
+        // What the domain still holds once everything stopped: the segments of processes
+        // that were killed (nobody is left to clean up after them). The campaign's domain is
+        // its own: removed.
+        std::thread::sleep(Duration::from_millis(200));
+        let left = procs::shm_entries(&self.domain.prefix(), &self.domain.root_path());
+        self.resources.left_after_stop = left.len() as u64;
+        for f in &left {
+            let _ = std::fs::remove_file(f);
+        }
+        let _ = std::fs::remove_dir_all(self.domain.root_path());
         Report::new(
             self.o,
             self.started.elapsed(),

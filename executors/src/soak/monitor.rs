@@ -560,14 +560,14 @@ impl Eye {
             self.held_goals = None;
             return;
         };
+        // The watchdog's doing (every joint says WATCHDOG), not a step of an enable the
+        // controller asked for before it died (which passes through a torque-off poll).
+        let tripped = w.flags.iter().all(|f| f & status::WATCHDOG != 0);
         let safe = match self.robot.sim {
             // Out of motor mode: the motors produce no torque.
-            Sim::Slcan(_) => self.truth.iter().all(|t| !t.driving),
+            Sim::Slcan(_) => tripped && self.truth.iter().all(|t| !t.driving),
             // Hold: every joint says WATCHDOG, and every servo still has its torque on.
-            Sim::Dxl(_) => {
-                w.flags.iter().all(|f| f & status::WATCHDOG != 0)
-                    && self.truth.iter().all(|t| t.driving)
-            }
+            Sim::Dxl(_) => tripped && self.truth.iter().all(|t| t.driving),
         };
         if safe && w.safe_ns.is_none() && now >= armed {
             w.safe_ns = Some(now);

@@ -289,6 +289,8 @@ pub struct Resources {
     pub shm: Vec<(f64, u64, u64)>,
     /// Entries at the end that were not there after the warm-up (at most 20).
     pub shm_new: Vec<String>,
+    /// Entries left once every process had stopped (removed then).
+    pub left_after_stop: u64,
     #[serde(skip)]
     shm_base_names: Vec<String>,
 }
