@@ -196,8 +196,13 @@ pub(crate) const STEP_TRIES: u8 = 10;
 /// tries: on a noisy bus a round of bundled requests is lost often, which says nothing about
 /// the device.
 pub(crate) const LOST_ROUNDS: u8 = 60;
-/// How long a lifecycle round may go without any answer before it counts as lost (ns).
+/// How long a lifecycle round on a CAN bus may go without any answer before it counts as
+/// lost (ns).
 pub(crate) const ROUND_TIMEOUT_NS: u64 = 250_000_000;
+/// The same on a register bus, where a round may wait behind the others of a large bus (the
+/// bring-up of 41 servos takes that long), and every request is answered, if only `Missing`,
+/// unless its answer itself was lost in the stage (ns).
+pub(crate) const REG_ROUND_TIMEOUT_NS: u64 = 2_000_000_000;
 /// A safe action not yet confirmed is sent again this often (ns), until it is confirmed or
 /// the executor stops waiting.
 pub(crate) const SAFE_RETRY_NS: u64 = 20_000_000;
@@ -284,8 +289,9 @@ pub(crate) struct Lifecycle<S> {
     /// again) says nothing about this round.
     pub(crate) sent_tick: u64,
     /// When they went out (ns): a round that got neither an answer nor a `Missing` by
-    /// [`ROUND_TIMEOUT_NS`] later is lost (a request the link dropped unsent, or superseded
-    /// by a newer one for the same device, is answered by nothing).
+    /// [`ROUND_TIMEOUT_NS`] ([`REG_ROUND_TIMEOUT_NS`] on a register bus) later is lost (a CAN
+    /// motor's frame superseded unsent by a newer one for the same motor is answered by
+    /// nothing).
     pub(crate) sent_ns: u64,
     pub(crate) tries: u8,
     /// Rounds of the step lost to the line (see [`LOST_ROUNDS`]).
@@ -334,9 +340,9 @@ impl<S: LifeStep> Lifecycle<S> {
     }
 
     /// Whether the round out since [`mark_sent`](Self::mark_sent) has had no answer for
-    /// [`ROUND_TIMEOUT_NS`].
-    pub(crate) fn round_overdue(&self, now_ns: u64) -> bool {
-        self.sent && self.step != S::NONE && now_ns >= self.sent_ns + ROUND_TIMEOUT_NS
+    /// `timeout_ns`.
+    pub(crate) fn round_overdue(&self, now_ns: u64, timeout_ns: u64) -> bool {
+        self.sent && self.step != S::NONE && now_ns >= self.sent_ns + timeout_ns
     }
 
     /// The step's round was lost to the line (a reply missing): sent again at once while

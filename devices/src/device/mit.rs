@@ -19,7 +19,9 @@
 //! ranges are set in the motor's own menu): bring-up checks that the motor answers. A fault code
 //! (8-byte replies of newer firmware) trips it.
 
-use crate::lifecycle::{DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup};
+use crate::lifecycle::{
+    DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, ROUND_TIMEOUT_NS,
+};
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
 use crate::stage::{Channel, Device, SafeAction, TickCtx};
@@ -193,7 +195,7 @@ impl MitMotor {
 
     /// Lifecycle requests of this tick; true if a frame went out.
     fn drive(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) -> bool {
-        if self.managed() && self.life.round_overdue(ctx.now_ns) {
+        if self.managed() && self.life.round_overdue(ctx.now_ns, ROUND_TIMEOUT_NS) {
             // Neither its answer nor word of it missing came: lost (sent again below).
             self.retry(ctx.now_ns);
         }

@@ -21,7 +21,9 @@
 //! damaged: the channel goes stale and the rejection is counted, never delivered.
 
 use super::register::{ConfigItem, ControlTable, RegChannel};
-use crate::lifecycle::{Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup};
+use crate::lifecycle::{
+    Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, REG_ROUND_TIMEOUT_NS,
+};
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
 use crate::stage::{Channel, Device, SafeAction, TickCtx};
@@ -310,7 +312,12 @@ impl<T: ControlTable> RegDevice<T> {
                 }
             }
         }
-        if self.life.managed() && self.life.base.round_overdue(ctx.now_ns) {
+        if self.life.managed()
+            && self
+                .life
+                .base
+                .round_overdue(ctx.now_ns, REG_ROUND_TIMEOUT_NS)
+        {
             // Neither its answers nor word of them missing came: lost (sent again below).
             for e in &mut self.life.expect[..self.life.n_expect] {
                 e.got = None;

@@ -161,7 +161,7 @@ struct Txn {
 /// Largest gap between two reads of one device that one transaction reads across (bytes): the
 /// price of a separate transaction (an instruction and a status packet's framing) is about
 /// this much.
-const MAX_SPAN_GAP: u16 = 24;
+const MAX_SPAN_GAP: u16 = 64;
 
 /// Most transactions tracked at once: the one on the bus and the expired ones whose late replies
 /// may still come.

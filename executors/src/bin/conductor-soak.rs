@@ -34,10 +34,10 @@ struct RunArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Probability that a byte on a wire is corrupted.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.005)]
     corrupt: f64,
     /// Probability that a byte on a wire is lost.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.005)]
     drop: f64,
     /// Command frames per second of each controller.
     #[arg(long, default_value_t = 1000.0)]

@@ -4,7 +4,8 @@
 //! adapter (the shipped manifests, pointed at in-process simulators on pseudo-terminals) run
 //! under the launcher while, for a chosen time:
 //!
-//! * every bus corrupts and drops bytes (1 % each by default; see [`rig`] for where);
+//! * every bus corrupts and drops bytes (0.5 % each by default, 1 % of the bytes damaged;
+//!   see [`rig`] for where);
 //! * a controller process per robot commands it at 1 kHz, now and then with values out of
 //!   limits, NaN or infinite;
 //! * one at a time, at random, per robot: the adapter is unplugged and plugged back, the
