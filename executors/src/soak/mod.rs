@@ -64,6 +64,9 @@ pub struct Options {
     pub controller: Vec<String>,
 }
 
+/// How often an unconfirmed safe action is sent again (devices' lifecycle).
+const SAFE_RETRY_NS: u64 = 20_000_000;
+
 /// The kinds of faults injected on purpose, one at a time.
 const EVENTS: [Fault; 5] = [
     Fault::Unplug,
@@ -460,11 +463,12 @@ impl Campaign<'_> {
         let mut result = Ok(0);
         let w = lock(&self.members[m].watched);
         let lateness = w.counted().lateness_max_ns;
-        // Requests lost on the way down (the safe command among them) are sent again at the
-        // next tick: one tick each.
+        // Requests lost on the way down (the safe command among them) are sent again, 20 ms
+        // later (the lifecycle's safe-action retry).
         let lost_down = w.injected_down - down0;
         drop(w);
-        let limit = r.watchdog_ns + 2 * r.tick_ns + lateness + 2_000_000 + lost_down * r.tick_ns;
+        let limit =
+            r.watchdog_ns + 2 * r.tick_ns + lateness + 2_000_000 + lost_down * SAFE_RETRY_NS;
         match safe {
             None => {
                 lock(&self.members[m].watched).unsafe_events += 1;

@@ -31,6 +31,8 @@ use super::rig::{DeviceTruth, Robot, Sim, PULSE};
 const HISTORY_NS: u64 = 3_000_000_000;
 /// How far from where a joint is a command may be and still count as holding it there (rad).
 const HOLD_TOLERANCE: f64 = 0.02;
+/// How close to where a servo stands its Goal Position must be for it to hold (pulses).
+const HOLD_PULSES: f64 = 3.0;
 /// The longest gap between two polls of the simulator a published value is judged across.
 const GAP_NS: u64 = 5_000_000;
 /// Examples of each kind of failure kept for the report.
@@ -567,7 +569,14 @@ impl Eye {
             // Out of motor mode: the motors produce no torque.
             Sim::Slcan(_) => tripped && self.truth.iter().all(|t| !t.driving),
             // Hold: every joint says WATCHDOG, and every servo still has its torque on.
-            Sim::Dxl(_) => tripped && self.truth.iter().all(|t| t.driving),
+            // Hold: torque on, Goal Position where the servo stands (written by the hold).
+            Sim::Dxl(_) => {
+                tripped
+                    && self
+                        .truth
+                        .iter()
+                        .all(|t| t.driving && (t.goal - t.position).abs() <= HOLD_PULSES * PULSE)
+            }
         };
         if safe && w.safe_ns.is_none() && now >= armed {
             w.safe_ns = Some(now);
