@@ -451,11 +451,13 @@ impl Campaign<'_> {
             w.safe_ns = None;
             w.hold_from_ns = None;
         }
+        // Safe, and still safe when the watchdog must have fired.
+        let fired = t + r.watchdog_ns + 2 * r.tick_ns;
         let wait_until =
             Instant::now() + Duration::from_nanos(r.watchdog_ns) + Duration::from_secs(3);
         let safe = loop {
             let s = lock(&self.members[m].watched).safe_ns;
-            if s.is_some() || Instant::now() > wait_until {
+            if (s.is_some() && monotonic_ns() >= fired) || Instant::now() > wait_until {
                 break s;
             }
             std::thread::sleep(Duration::from_millis(1));

@@ -578,13 +578,17 @@ impl Eye {
                         .all(|t| t.driving && (t.goal - t.position).abs() <= HOLD_PULSES * PULSE)
             }
         };
-        if safe && w.safe_ns.is_none() && now >= armed {
-            w.safe_ns = Some(now);
-            if matches!(self.robot.sim, Sim::Dxl(_)) {
-                self.held_goals = Some(self.truth.iter().map(|t| t.goal).collect());
-            }
-        }
         let Some(from) = w.hold_from_ns else {
+            // Until the campaign starts watching it stay: the latest entry into the safe state
+            // (a trip of before, left by an enable still under way, does not count).
+            if !safe {
+                w.safe_ns = None;
+            } else if w.safe_ns.is_none() && now >= armed {
+                w.safe_ns = Some(now);
+                if matches!(self.robot.sim, Sim::Dxl(_)) {
+                    self.held_goals = Some(self.truth.iter().map(|t| t.goal).collect());
+                }
+            }
             return;
         };
         if now < from {
