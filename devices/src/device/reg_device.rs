@@ -629,6 +629,10 @@ impl<T: ControlTable> RegDevice<T> {
                 self.life.base.status.phase = Phase::Probing;
                 self.life.base.next_try_ns = now + BOOT_NS;
             }
+            // A read of an earlier round (a sample's, or one given up) is not this round's
+            // answer: its value may be long out of date (a present position read before a
+            // hold, or a reply that came late).
+            (_, ReplyData::Register { .. }) if reply.tick < self.life.base.sent_tick => {}
             (_, ReplyData::Register { addr, len, value }) => {
                 let l = &mut self.life;
                 let n = l.n_expect;

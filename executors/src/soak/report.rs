@@ -519,6 +519,14 @@ impl Report {
         for r in &self.robots {
             for (f, k) in &r.faults {
                 let counted = k.counted.map_or("-".to_string(), |c| c.to_string());
+                // The controllers do not report how many bad values they sent (they are killed
+                // at random): the executor's count of rejected and clamped setpoints is the
+                // figure.
+                let injected = if *f == Fault::BadSetpoints {
+                    "-".to_string()
+                } else {
+                    k.injected.to_string()
+                };
                 let (rec, worst, mean) = if k.recovered > 0 {
                     (
                         k.recovered.to_string(),
@@ -533,7 +541,7 @@ impl Report {
                     "{:<11} {:<20} {:>10} {:>12} {:>10} {:>14} {:>12}",
                     r.subsystem,
                     f.name(),
-                    k.injected,
+                    injected,
                     counted,
                     rec,
                     worst,
