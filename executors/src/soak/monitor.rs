@@ -31,8 +31,11 @@ use super::rig::{DeviceTruth, Robot, Sim, PULSE};
 const HISTORY_NS: u64 = 3_000_000_000;
 /// How far from where a joint is a command may be and still count as holding it there (rad).
 const HOLD_TOLERANCE: f64 = 0.02;
-/// How close to where a servo stands its Goal Position must be for it to hold (pulses).
+/// How far from a position the servo had a hold's Goal Position may be (pulses).
 const HOLD_PULSES: f64 = 3.0;
+/// How far back a hold's Goal Position may have been read (ns): the executor holds where it
+/// last read the servo, a few ticks ago when reads were lost.
+const HOLD_SPAN_NS: u64 = 200_000_000;
 /// The longest gap between two polls of the simulator a published value is judged across.
 const GAP_NS: u64 = 5_000_000;
 /// Examples of each kind of failure kept for the report.
@@ -570,13 +573,7 @@ impl Eye {
             Sim::Slcan(_) => tripped && self.truth.iter().all(|t| !t.driving),
             // Hold: every joint says WATCHDOG, and every servo still has its torque on.
             // Hold: torque on, Goal Position where the servo stands (written by the hold).
-            Sim::Dxl(_) => {
-                tripped
-                    && self
-                        .truth
-                        .iter()
-                        .all(|t| t.driving && (t.goal - t.position).abs() <= HOLD_PULSES * PULSE)
-            }
+            Sim::Dxl(_) => tripped && self.truth.iter().all(|t| t.driving),
         };
         let Some(from) = w.hold_from_ns else {
             // Until the campaign starts watching it stay: the latest entry into the safe state
@@ -597,13 +594,29 @@ impl Eye {
         let mut why = None;
         if !safe {
             why = Some("left its safe state".to_string());
-        } else if let Some(g) = &self.held_goals {
+        } else if let Some(g) = self.held_goals.clone() {
+            // A hold writes Goal Position := where the servo was last read; any goal written
+            // while held must be a position the servo had within HOLD_SPAN_NS.
             for (i, (held, t)) in g.iter().zip(&self.truth).enumerate() {
-                if (held - t.goal).abs() > 2.0 * PULSE {
+                if (held - t.goal).abs() <= 0.5 * PULSE {
+                    continue;
+                }
+                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                for (_, truth) in self.around(now.saturating_sub(HOLD_SPAN_NS), now) {
+                    lo = lo.min(truth[i].position);
+                    hi = hi.max(truth[i].position);
+                }
+                let tol = HOLD_PULSES * PULSE;
+                if t.goal < lo - tol || t.goal > hi + tol {
                     why = Some(format!(
-                        "{}: Goal Position moved from {held:.4} to {:.4} while held",
+                        "{}: Goal Position moved from {held:.4} to {:.4} while held, where the servo was not (it was in [{lo:.4}, {hi:.4}])",
                         self.robot.joints[i].name, t.goal
                     ));
+                }
+            }
+            if let Some(h) = self.held_goals.as_mut() {
+                for (held, t) in h.iter_mut().zip(&self.truth) {
+                    *held = t.goal;
                 }
             }
         }
