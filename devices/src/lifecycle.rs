@@ -191,6 +191,18 @@ pub(crate) const PROBE_SPACING_NS: u64 = 50_000_000;
 /// Attempts of any other lifecycle step before it fails (a reply lost to noise, or late behind
 /// a busy USB adapter, is not a refusal).
 pub(crate) const STEP_TRIES: u8 = 10;
+/// Rounds of a lifecycle step (other than the probe and a safe action) lost to the line — a
+/// request or its reply damaged or missing — that are sent again before the losses count as
+/// tries: on a noisy bus a round of bundled requests is lost often, which says nothing about
+/// the device.
+pub(crate) const LOST_ROUNDS: u8 = 60;
+/// How long a lifecycle round on a CAN bus may go without any answer before it counts as
+/// lost (ns).
+pub(crate) const ROUND_TIMEOUT_NS: u64 = 250_000_000;
+/// The same on a register bus, where a round may wait behind the others of a large bus (the
+/// bring-up of 41 servos takes that long), and every request is answered, if only `Missing`,
+/// unless its answer itself was lost in the stage (ns).
+pub(crate) const REG_ROUND_TIMEOUT_NS: u64 = 2_000_000_000;
 /// A safe action not yet confirmed is sent again this often (ns), until it is confirmed or
 /// the executor stops waiting.
 pub(crate) const SAFE_RETRY_NS: u64 = 20_000_000;
@@ -273,7 +285,17 @@ pub(crate) struct Lifecycle<S> {
     pub(crate) step: S,
     /// The step's requests are out.
     pub(crate) sent: bool,
+    /// The tick they went out in: a reply to an older request (a round given up and sent
+    /// again) says nothing about this round.
+    pub(crate) sent_tick: u64,
+    /// When they went out (ns): a round that got neither an answer nor a `Missing` by
+    /// [`ROUND_TIMEOUT_NS`] ([`REG_ROUND_TIMEOUT_NS`] on a register bus) later is lost (a CAN
+    /// motor's frame superseded unsent by a newer one for the same motor is answered by
+    /// nothing).
+    pub(crate) sent_ns: u64,
     pub(crate) tries: u8,
+    /// Rounds of the step lost to the line (see [`LOST_ROUNDS`]).
+    pub(crate) lost: u8,
     /// The step's requests go out again no earlier than this.
     pub(crate) next_try_ns: u64,
 }
@@ -289,7 +311,10 @@ impl<S: LifeStep> Lifecycle<S> {
             resume_on: false,
             step: S::NONE,
             sent: false,
+            sent_tick: 0,
+            sent_ns: 0,
             tries: 0,
+            lost: 0,
             next_try_ns: 0,
         }
     }
@@ -304,6 +329,34 @@ impl<S: LifeStep> Lifecycle<S> {
         self.step = step;
         self.sent = false;
         self.tries = 0;
+        self.lost = 0;
+    }
+
+    /// Marks the step's requests as sent now.
+    pub(crate) fn mark_sent(&mut self, tick: u64, now_ns: u64) {
+        self.sent = true;
+        self.sent_tick = tick;
+        self.sent_ns = now_ns;
+    }
+
+    /// Whether the round out since [`mark_sent`](Self::mark_sent) has had no answer for
+    /// `timeout_ns`.
+    pub(crate) fn round_overdue(&self, now_ns: u64, timeout_ns: u64) -> bool {
+        self.sent && self.step != S::NONE && now_ns >= self.sent_ns + timeout_ns
+    }
+
+    /// The step's round was lost to the line (a reply missing): sent again at once while
+    /// fewer than [`LOST_ROUNDS`] were lost, else counted as a try like
+    /// [`retry_exhausted`](Self::retry_exhausted) (the probe and a safe action count every
+    /// loss as a try: they have their own spacing and budget).
+    pub(crate) fn lost_exhausted(&mut self, now_ns: u64) -> bool {
+        if self.step != S::PROBE && self.step != S::SAFE && self.lost < LOST_ROUNDS {
+            self.lost += 1;
+            self.sent = false;
+            self.next_try_ns = now_ns;
+            return false;
+        }
+        self.retry_exhausted(now_ns)
     }
 
     /// The step's request went unanswered (or was refused): counts the try and, below the

@@ -254,3 +254,40 @@ fn odrive_polled_and_cyclic() {
         assert!(states.contains(&Some(8.0)), "heartbeat state closed loop");
     }
 }
+
+/// A lifecycle request that is answered by nothing — its frame dropped unsent (a newer one for
+/// the same motor superseded it), so neither a reply nor a `Missing` ever comes — is sent again
+/// once the round is overdue, instead of leaving the motor probing (or enabling) for ever.
+#[test]
+fn a_round_answered_by_nothing_is_sent_again() {
+    use conductor_devices::{MitSpecial, Op, Phase, Startup};
+    let mut d = MitMotor::new(Credential::id(1), 20.0, 1.0);
+    let at = |tick: u64| TickCtx {
+        tick,
+        now_ns: tick * PERIOD_NS,
+    };
+    d.bring_up(Startup::Enable, at(0));
+    let flush = |d: &mut MitMotor, tick| {
+        let mut out = Bounded::with_capacity(8);
+        d.flush(at(tick), &mut out);
+        out.as_slice().iter().map(|r| r.op).collect::<Vec<Op>>()
+    };
+    let poll = Op::MitSpecial(MitSpecial::Exit);
+    assert_eq!(flush(&mut d, 0), [poll], "the probe polls the motor");
+    // Nothing comes back, not even word of the request missing: the round waits a while...
+    for tick in 1..100 {
+        assert!(
+            flush(&mut d, tick).is_empty(),
+            "tick {tick}: nothing sent yet"
+        );
+    }
+    assert_eq!(d.status().phase, Phase::Probing);
+    // ... and after 250 ms (125 ticks) is lost, and sent again (a probe after its 50 ms
+    // spacing).
+    let again: Vec<Op> = (100..=160).flat_map(|t| flush(&mut d, t)).collect();
+    assert_eq!(
+        again,
+        [poll],
+        "the poll is sent again once the round is overdue"
+    );
+}

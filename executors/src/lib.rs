@@ -13,6 +13,7 @@
 //! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
 //! * [`stress`] — the thesis' stress test (sine states and an external logger).
 //! * [`demo`] — the mini-Hubo demo's gait and PID (the `conductor-demo` program).
+//! * [`soak`] — the fault campaign on the simulated robots of deploy/ (`conductor-soak`).
 //! * [`cleanup`] — the domain's iceoryx2 nodes, and removing what dead ones left behind.
 //!
 //! See the crate's README for the data flow of one tick.
@@ -39,5 +40,6 @@ pub mod process;
 pub mod rt;
 pub mod schedule;
 pub mod signals;
+pub mod soak;
 pub mod stages;
 pub mod stress;

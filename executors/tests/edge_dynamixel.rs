@@ -433,3 +433,42 @@ fn hold_off_stays_limp_until_the_first_setpoint_then_moves_from_where_it_is() {
     drop(s);
     assert!(exec.stop().success());
 }
+
+/// A noisy bus (1 % of the bytes damaged, half corrupted and half lost, both directions): every
+/// servo is still brought up, since each lifecycle step is retried and a lost reply is not a
+/// refusal (before, a step's ten tries were used up by losses: "does not answer").
+#[test]
+fn bring_up_survives_a_noisy_bus() {
+    let link = std::env::temp_dir().join(format!("conductor-edge-noisy-{}", std::process::id()));
+    let noise = |seed| FaultConfig {
+        corrupt: 0.005,
+        drop: 0.005,
+        seed,
+        ..FaultConfig::default()
+    };
+    for seed in 1..=3u64 {
+        let sim = run_dxl(
+            Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
+            ids(6),
+            noise(seed),
+            noise(seed ^ 0x5EED),
+        );
+        sim.sim().start_log();
+        let (r, _d) = start("noisy", &manifest(&link.display().to_string(), 6, "", ""));
+        match r {
+            Ok(mut exec) => {
+                assert!(exec.stop().success());
+            }
+            Err((status, log)) => {
+                let s = sim.sim();
+                let mine: Vec<_> = s
+                    .instruction_log()
+                    .iter()
+                    .filter(|r| r.1 == 2 || r.1 == 0xFE)
+                    .map(|r| format!("{:.1}ms i{:#x} a{} {:?}", r.0 as f64 / 1e6, r.2, r.3, r.4))
+                    .collect();
+                panic!("seed {seed}: {status}: {log:#?}\nservo 2: {mine:#?}");
+            }
+        }
+    }
+}

@@ -19,7 +19,9 @@
 //! ranges are set in the motor's own menu): bring-up checks that the motor answers. A fault code
 //! (8-byte replies of newer firmware) trips it.
 
-use crate::lifecycle::{DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup};
+use crate::lifecycle::{
+    DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, ROUND_TIMEOUT_NS,
+};
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
 use crate::stage::{Channel, Device, SafeAction, TickCtx};
@@ -193,6 +195,10 @@ impl MitMotor {
 
     /// Lifecycle requests of this tick; true if a frame went out.
     fn drive(&mut self, ctx: TickCtx, out: &mut Bounded<Request>) -> bool {
+        if self.managed() && self.life.round_overdue(ctx.now_ns, ROUND_TIMEOUT_NS) {
+            // Neither its answer nor word of it missing came: lost (sent again below).
+            self.retry(ctx.now_ns);
+        }
         if !self.managed() || self.life.sent || ctx.now_ns < self.life.next_try_ns {
             return false;
         }
@@ -225,13 +231,15 @@ impl MitMotor {
                 self.push(op, ctx, out);
             }
         }
-        self.life.sent = true;
+        self.life.mark_sent(ctx.tick, ctx.now_ns);
         self.dirty = false;
         true
     }
 
+    /// The step's reply is missing (the frame or its answer lost on the bus): sent again,
+    /// within the step's budget for losses.
     fn retry(&mut self, now_ns: u64) {
-        if !self.life.retry_exhausted(now_ns) {
+        if !self.life.lost_exhausted(now_ns) {
             return;
         }
         match self.life.step {
@@ -521,7 +529,7 @@ impl Device for MitMotor {
         self.push(op, ctx, out);
         if managed {
             self.awaiting = Some(op);
-            self.life.sent = true;
+            self.life.mark_sent(ctx.tick, ctx.now_ns);
             if matches!(op, Op::Mit { .. }) {
                 self.safe_cmd = Some(op);
                 self.life.status.phase = Phase::Holding;

@@ -21,7 +21,9 @@
 //! damaged: the channel goes stale and the rejection is counted, never delivered.
 
 use super::register::{ConfigItem, ControlTable, RegChannel};
-use crate::lifecycle::{Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup};
+use crate::lifecycle::{
+    Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, REG_ROUND_TIMEOUT_NS,
+};
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
 use crate::stage::{Channel, Device, SafeAction, TickCtx};
@@ -310,10 +312,22 @@ impl<T: ControlTable> RegDevice<T> {
                 }
             }
         }
+        if self.life.managed()
+            && self
+                .life
+                .base
+                .round_overdue(ctx.now_ns, REG_ROUND_TIMEOUT_NS)
+        {
+            // Neither its answers nor word of them missing came: lost (sent again below).
+            for e in &mut self.life.expect[..self.life.n_expect] {
+                e.got = None;
+            }
+            self.retry_lost(ctx.now_ns);
+        }
         if self.life.base.sent || ctx.now_ns < self.life.base.next_try_ns {
             return;
         }
-        self.life.base.sent = true;
+        self.life.base.mark_sent(ctx.tick, ctx.now_ns);
         match self.life.base.step {
             Step::None => self.life.base.sent = false,
             Step::Probe => self.push(Op::Ping, ctx, out),
@@ -397,10 +411,23 @@ impl<T: ControlTable> RegDevice<T> {
 
     /// A lifecycle request went unanswered (or was refused): retry, or give up.
     fn retry(&mut self, now_ns: u64) {
-        let l = &mut self.life;
-        if !l.base.retry_exhausted(now_ns) {
+        if !self.life.base.retry_exhausted(now_ns) {
             return;
         }
+        self.give_up(now_ns);
+    }
+
+    /// A lifecycle round was lost to the line (a read missing): sent again, within its budget.
+    fn retry_lost(&mut self, now_ns: u64) {
+        if !self.life.base.lost_exhausted(now_ns) {
+            return;
+        }
+        self.give_up(now_ns);
+    }
+
+    /// The step's tries are used up.
+    fn give_up(&mut self, now_ns: u64) {
+        let l = &mut self.life;
         match l.base.step {
             Step::Probe | Step::ModelRead | Step::ReadConfig => l.base.fail(Failure::NoAnswer),
             Step::WriteConfig => {
@@ -524,7 +551,13 @@ impl<T: ControlTable> RegDevice<T> {
             }
             Step::Enable => {
                 if self.life.expected().iter().any(|e| e.got != e.want) {
-                    return self.retry(now_ns);
+                    // Torque still off with no fault reported: the write was lost on the line
+                    // (a latched fault shows in the status packets and is retried as a try).
+                    return if self.life.base.status.fault == 0 {
+                        self.retry_lost(now_ns)
+                    } else {
+                        self.retry(now_ns)
+                    };
                 }
                 let l = &mut self.life;
                 l.torque = Some(true);
@@ -596,6 +629,10 @@ impl<T: ControlTable> RegDevice<T> {
                 self.life.base.status.phase = Phase::Probing;
                 self.life.base.next_try_ns = now + BOOT_NS;
             }
+            // A read of an earlier round (a sample's, or one given up) is not this round's
+            // answer: its value may be long out of date (a present position read before a
+            // hold, or a reply that came late).
+            (_, ReplyData::Register { .. }) if reply.tick < self.life.base.sent_tick => {}
             (_, ReplyData::Register { addr, len, value }) => {
                 let l = &mut self.life;
                 let n = l.n_expect;
@@ -621,7 +658,9 @@ impl<T: ControlTable> RegDevice<T> {
                     .expected()
                     .iter()
                     .any(|e| e.addr == addr && e.len == len && e.got.is_none());
-                if waiting && self.life.base.sent {
+                // A read of an earlier round (given up, then sent again) that comes back
+                // missing now is no news about this round.
+                if waiting && self.life.base.sent && reply.tick >= self.life.base.sent_tick {
                     // One retry per round: the other reads of the round are resent with it.
                     for e in &mut self.life.expect[..self.life.n_expect] {
                         e.got = None;
@@ -629,7 +668,7 @@ impl<T: ControlTable> RegDevice<T> {
                     if self.life.base.step == Step::Safe {
                         self.life.base.sent = false;
                     }
-                    self.retry(now);
+                    self.retry_lost(now);
                 }
             }
             _ => {}
@@ -809,7 +848,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
         let managed = self.life.managed();
         if managed {
             self.life.go(Step::Safe);
-            self.life.base.sent = true;
+            self.life.base.mark_sent(ctx.tick, ctx.now_ns);
             if !self.life.base.begin_safe() {
                 return;
             }

@@ -110,6 +110,14 @@ pub(crate) struct Entry {
     done: bool,
 }
 
+impl Entry {
+    /// Whether this entry answers `w` (a PING or REBOOT answers every special of its device).
+    fn covers(&self, w: &Waiter, special: bool) -> bool {
+        self.id == w.cred.id as u8
+            && (special || (w.addr >= self.addr && w.end() <= self.addr + self.len))
+    }
+}
+
 /// How a status packet's error byte reads, protocol-independently.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct StatusErr {
@@ -149,6 +157,11 @@ struct Txn {
     /// (entry index, waiter).
     waiters: Vec<(usize, Waiter)>,
 }
+
+/// Largest gap between two reads of one device that one transaction reads across (bytes): the
+/// price of a separate transaction (an instruction and a status packet's framing) is about
+/// this much.
+const MAX_SPAN_GAP: u16 = 64;
 
 /// Most transactions tracked at once: the one on the bus and the expired ones whose late replies
 /// may still come.
@@ -394,6 +407,12 @@ impl Core {
         )
     }
 
+    /// The span read from `id` this transaction: from its lowest queued address, growing over
+    /// the queued reads that start within [`MAX_SPAN_GAP`] bytes of it. Reads further away
+    /// (a configuration register and the present position, queued together during
+    /// bring-up) wait for the next transaction rather than being read with everything in
+    /// between: a long status packet is long on the wire and, on a noisy line, rarely
+    /// arrives whole.
     fn span_of(&self, id: u8) -> Entry {
         let mine = || {
             self.want_reads
@@ -402,7 +421,19 @@ impl Core {
                 .filter(move |w| w.cred.id as u8 == id)
         };
         let addr = mine().map(|w| w.addr).min().unwrap_or(0);
-        let end = mine().map(Waiter::end).max().unwrap_or(0);
+        let mut end = addr;
+        loop {
+            let grown = mine()
+                .filter(|w| w.addr <= end + MAX_SPAN_GAP)
+                .map(Waiter::end)
+                .max()
+                .unwrap_or(end)
+                .max(end);
+            if grown == end {
+                break;
+            }
+            end = grown;
+        }
         Entry {
             id,
             addr,
@@ -425,7 +456,7 @@ impl Core {
         let queue = if special { want_specials } else { want_reads };
         let mut taken = false;
         queue.retain(|w| {
-            if (special && taken) || !entries.iter().any(|e| e.id == w.cred.id as u8) {
+            if (special && taken) || !entries.iter().any(|e| e.covers(w, special)) {
                 return true;
             }
             taken = true;
@@ -485,7 +516,7 @@ impl Core {
             if special && taken {
                 return true;
             }
-            let Some(i) = entries.iter().position(|e| e.id == w.cred.id as u8) else {
+            let Some(i) = entries.iter().position(|e| e.covers(w, special)) else {
                 return true;
             };
             taken = true;

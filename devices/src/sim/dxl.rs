@@ -570,6 +570,12 @@ impl DxlBusSim {
         self.log.as_deref().unwrap_or(&[])
     }
 
+    /// Takes the instructions logged so far, leaving the log running and empty (a long run
+    /// drains it as it goes, so it does not grow).
+    pub fn take_log(&mut self) -> Vec<InstructionRecord> {
+        self.log.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
     /// The configuration.
     pub fn config(&self) -> &DxlSimConfig {
         &self.cfg

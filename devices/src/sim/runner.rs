@@ -14,7 +14,7 @@ use std::io;
 use std::net::{SocketAddr, UdpSocket};
 use std::os::unix::io::{AsRawFd, RawFd};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -160,6 +160,8 @@ struct Io {
     peer: Option<SocketAddr>,
     plug: Arc<Plug>,
     t0: Instant,
+    /// The longest this thread overslept a wait since the handle last asked (ns).
+    lag: Arc<AtomicU64>,
 }
 
 impl Io {
@@ -200,6 +202,15 @@ impl Io {
     /// Waits up to `timeout` (at most 50 ms) for input; returns what arrived.
     fn read(&mut self, buf: &mut [u8], timeout: Duration) -> usize {
         let timeout = timeout.min(Duration::from_millis(50));
+        let start = Instant::now();
+        let n = self.read_inner(buf, timeout);
+        // Woken later than asked: the thread did not get the CPU (replies went out late).
+        let over = start.elapsed().saturating_sub(timeout).as_nanos() as u64;
+        self.lag.fetch_max(over, Ordering::Relaxed);
+        n
+    }
+
+    fn read_inner(&mut self, buf: &mut [u8], timeout: Duration) -> usize {
         if self.plug.paused.load(Ordering::Relaxed) {
             std::thread::sleep(timeout.min(Duration::from_millis(1)));
             return 0;
@@ -277,6 +288,7 @@ enum Replug {
 pub struct Running<S> {
     sim: Arc<Mutex<S>>,
     faults: Arc<Faults>,
+    lag: Arc<AtomicU64>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     endpoint: String,
@@ -301,6 +313,7 @@ impl<S: Send + 'static> Running<S> {
         sim: S,
         serve: impl FnOnce(Io, &Mutex<S>, &Faults, &AtomicBool) + Send + 'static,
     ) -> Self {
+        let lag = Arc::new(AtomicU64::new(0));
         let endpoint = ep.describe();
         let replug = match &ep {
             Endpoint::Pty(p) => p.link().map_or(Replug::Never, |l| Replug::Pty(l.into())),
@@ -317,6 +330,7 @@ impl<S: Send + 'static> Running<S> {
             peer: None,
             plug: plug.clone(),
             t0,
+            lag: lag.clone(),
         };
         let (s2, f2, st2) = (sim.clone(), faults.clone(), stop.clone());
         let thread = std::thread::Builder::new()
@@ -326,6 +340,7 @@ impl<S: Send + 'static> Running<S> {
         Running {
             sim,
             faults,
+            lag,
             stop,
             thread: Some(thread),
             endpoint,
@@ -365,6 +380,13 @@ impl<S> Running<S> {
     /// (for [`SlcanAdapterSim::stall_until`] and the like).
     pub fn now_ns(&self) -> u64 {
         self.t0.elapsed().as_nanos() as u64
+    }
+
+    /// The longest the serving thread woke up later than it asked to, since the last call
+    /// (ns): on a loaded machine it may not get the CPU when a reply is due, and then the
+    /// reply leaves late (what a real device never does).
+    pub fn take_lag_ns(&self) -> u64 {
+        self.lag.swap(0, Ordering::Relaxed)
     }
 
     /// Whether the endpoint is plugged in.
@@ -529,31 +551,58 @@ pub fn run_dxl(
 /// its latency or stall, to within about 0.1 ms), cyclic node messages at least every
 /// millisecond.
 pub fn run_slcan(ep: Endpoint, adapter: SlcanAdapterSim) -> Running<SlcanAdapterSim> {
-    Running::spawn("slcan-sim", ep, adapter, |mut io, sim, _faults, stop| {
-        let mut buf = vec![0u8; 4096];
-        let mut out = Vec::with_capacity(4096);
-        while !stop.load(Ordering::Relaxed) {
-            io.service(|ev| {
-                if ev == PlugEvent::Unplugged {
-                    lock(sim).unplug();
+    run_slcan_with_faults(ep, adapter, FaultConfig::default(), FaultConfig::default())
+}
+
+/// [`run_slcan`] with the serial link damaged: `down` on each chunk the host sends, `up` on
+/// each chunk sent to the host (damage on the CAN wire itself is the adapter's:
+/// [`SlcanAdapterSim::set_wire_faults`]).
+pub fn run_slcan_with_faults(
+    ep: Endpoint,
+    adapter: SlcanAdapterSim,
+    down: FaultConfig,
+    up: FaultConfig,
+) -> Running<SlcanAdapterSim> {
+    Running::spawn(
+        "slcan-sim",
+        ep,
+        adapter,
+        move |mut io, sim, faults, stop| {
+            let mut down = FaultInjector::new(down);
+            let mut up = FaultInjector::new(up);
+            let mut chunk = Vec::with_capacity(4096);
+            let mut buf = vec![0u8; 4096];
+            let mut out = Vec::with_capacity(4096);
+            while !stop.load(Ordering::Relaxed) {
+                io.service(|ev| {
+                    if ev == PlugEvent::Unplugged {
+                        lock(sim).unplug();
+                    }
+                });
+                let due = lock(sim).next_due();
+                let now = io.now();
+                let wait = due.map_or(1_000_000, |d| d.saturating_sub(now).min(1_000_000));
+                let n = io.read(&mut buf, Duration::from_nanos(wait));
+                let t = io.now();
+                out.clear();
+                {
+                    let mut a = lock(sim);
+                    if n > 0 {
+                        chunk.clear();
+                        chunk.extend_from_slice(&buf[..n]);
+                        down.apply(&mut chunk);
+                        a.feed(&chunk, t, &mut out);
+                    }
+                    a.poll(t, &mut out);
                 }
-            });
-            let due = lock(sim).next_due();
-            let now = io.now();
-            let wait = due.map_or(1_000_000, |d| d.saturating_sub(now).min(1_000_000));
-            let n = io.read(&mut buf, Duration::from_nanos(wait));
-            let t = io.now();
-            out.clear();
-            {
-                let mut a = lock(sim);
-                if n > 0 {
-                    a.feed(&buf[..n], t, &mut out);
+                if !out.is_empty() {
+                    up.apply(&mut out);
+                    io.write(&out);
                 }
-                a.poll(t, &mut out);
+                if n > 0 || !out.is_empty() {
+                    *lock(faults) = (down.totals(), up.totals());
+                }
             }
-            if !out.is_empty() {
-                io.write(&out);
-            }
-        }
-    })
+        },
+    )
 }

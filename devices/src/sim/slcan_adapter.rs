@@ -15,13 +15,17 @@
 //! * [`inject_to_host`](SlcanAdapterSim::inject_to_host): raw bytes to the host (garbage, odd
 //!   lines);
 //! * [`unplug`](SlcanAdapterSim::unplug): the USB side lost power (channel closed, state lost;
-//!   the nodes keep theirs).
+//!   the nodes keep theirs);
+//! * [`set_wire_faults`](SlcanAdapterSim::set_wire_faults): frames damaged on the CAN wire,
+//!   lost whole as the CAN CRC makes them.
 
 use std::collections::VecDeque;
 
 use conductor_protocols::can::CanFrame;
 use conductor_protocols::slcan::{Command, DeviceScanner, Dialect, Response, TxAck};
-use embedded_can::Frame;
+use embedded_can::{Frame, Id};
+
+use super::fault::{FaultConfig, FaultInjector};
 
 use super::can_motors::CanNode;
 
@@ -40,6 +44,11 @@ pub struct SlcanSimStats {
     pub nacks: u64,
     /// Bytes sent to the host (handed out by `feed`/`poll`, after the latency).
     pub bytes_out: u64,
+    /// Host frames damaged on the CAN wire (see [`SlcanAdapterSim::set_wire_faults`]): the
+    /// nodes' CAN controllers discard them on the CRC, so they never arrive.
+    pub wire_lost_to_nodes: u64,
+    /// Node frames damaged on the CAN wire, discarded by the adapter's CAN controller.
+    pub wire_lost_to_host: u64,
 }
 
 /// The adapter.
@@ -63,6 +72,8 @@ pub struct SlcanAdapterSim {
     out_segments: VecDeque<(u64, usize)>,
     /// The latest time seen by `feed` or `poll`.
     now_ns: u64,
+    /// Damage on the CAN wire: (host → nodes, nodes → host).
+    wire: Option<(FaultInjector, FaultInjector)>,
 }
 
 impl std::fmt::Debug for SlcanAdapterSim {
@@ -94,6 +105,7 @@ impl SlcanAdapterSim {
             out_bytes: VecDeque::with_capacity(4096),
             out_segments: VecDeque::with_capacity(256),
             now_ns: 0,
+            wire: None,
         }
     }
 
@@ -106,6 +118,42 @@ impl SlcanAdapterSim {
     /// The bus log.
     pub fn log(&self) -> &[(bool, CanFrame)] {
         self.log.as_deref().unwrap_or(&[])
+    }
+
+    /// Takes the frames logged so far, leaving the log running and empty.
+    pub fn take_log(&mut self) -> Vec<(bool, CanFrame)> {
+        self.log.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    /// Damages frames on the CAN wire: the bytes of each frame (identifier and data) go through
+    /// an injector, one per direction, and a frame with any byte corrupted or lost is lost
+    /// whole, as a real CAN controller drops a frame whose CRC fails (counted in
+    /// [`SlcanSimStats::wire_lost_to_nodes`] and [`SlcanSimStats::wire_lost_to_host`]). The
+    /// adapter still acknowledges a transmit it put on the wire.
+    pub fn set_wire_faults(&mut self, to_nodes: FaultConfig, to_host: FaultConfig) {
+        self.wire = Some((FaultInjector::new(to_nodes), FaultInjector::new(to_host)));
+    }
+
+    /// Whether the frame survives the wire (`to_nodes`: the host's direction).
+    fn survives(&mut self, f: &CanFrame, to_nodes: bool) -> bool {
+        let Some((down, up)) = &mut self.wire else {
+            return true;
+        };
+        let mut bytes = match f.id() {
+            Id::Standard(s) => (s.as_raw() as u32).to_be_bytes().to_vec(),
+            Id::Extended(e) => e.as_raw().to_be_bytes().to_vec(),
+        };
+        bytes.extend_from_slice(f.data());
+        let (rec, _) = if to_nodes { down } else { up }.apply(&mut bytes);
+        if !rec.damaged() {
+            return true;
+        }
+        if to_nodes {
+            self.stats.wire_lost_to_nodes += 1;
+        } else {
+            self.stats.wire_lost_to_host += 1;
+        }
+        false
     }
 
     /// Counters since creation.
@@ -240,7 +288,7 @@ impl SlcanAdapterSim {
             if let Some(l) = &mut self.log {
                 l.push((false, *f));
             }
-            if self.open {
+            if self.open && self.survives(f, false) {
                 self.stats.frames_to_host += 1;
                 self.respond(
                     Response::Frame {
@@ -338,6 +386,9 @@ impl SlcanAdapterSim {
                             self.respond(ack, now_ns);
                         }
                         self.stats.frames_from_host += 1;
+                        if !self.survives(&f, true) {
+                            continue;
+                        }
                         if let Some(l) = &mut self.log {
                             l.push((true, f));
                         }

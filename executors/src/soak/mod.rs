@@ -1,0 +1,584 @@
+//! `conductor-soak`: a fault campaign on the simulated robots of deploy/.
+//!
+//! The mini-Hubo leg on its Dynamixel bus and the quadruped leg on MIT motors behind an SLCAN
+//! adapter (the shipped manifests, pointed at in-process simulators on pseudo-terminals) run
+//! under the launcher while, for a chosen time:
+//!
+//! * every bus corrupts and drops bytes (0.5 % each by default, 1 % of the bytes damaged;
+//!   see [`rig`] for where);
+//! * a controller process per robot commands it at 1 kHz, now and then with values out of
+//!   limits, NaN or infinite;
+//! * one at a time, at random, per robot: the adapter is unplugged and plugged back, the
+//!   executor is SIGKILLed (the launcher restarts it), the controller is SIGKILLed or stopped
+//!   with SIGSTOP (its clock stalls: the executor's watchdog must fire) and a new one started
+//!   or the old one continued, or the controller floods command frames back to back.
+//!
+//! [`monitor`] checks, from outside the executors, every published value and every value
+//! the devices received, the safe state after each controller death, and the counters; the
+//! campaign measures each recovery and what the processes and the domain hold. The result is
+//! one [`Report`]: a table and JSON.
+
+pub mod controller;
+pub mod monitor;
+pub mod procs;
+pub mod report;
+pub mod rig;
+
+use std::io::{BufRead, BufReader, Write};
+use std::path::PathBuf;
+use std::process::{Child, ChildStdin, Command, Stdio};
+use std::sync::atomic::AtomicBool;
+use std::sync::mpsc::{channel, Receiver};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use conductor_bus::{monotonic_ns, Domain};
+use conductor_devices::sim::fault::Rng;
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+
+use crate::launcher::{Launch, LaunchOptions};
+use monitor::{lock, Watched};
+pub use report::{Fault, Report};
+use rig::Robot;
+
+/// How to run a campaign.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// How long.
+    pub duration: Duration,
+    /// Seed of the faults and of their schedule.
+    pub seed: u64,
+    /// Probability that a byte on a wire is corrupted.
+    pub corrupt: f64,
+    /// Probability that a byte on a wire is lost.
+    pub drop: f64,
+    /// Command frames per second of each controller.
+    pub rate_hz: f64,
+    /// The workspace root (deploy/ is read from there).
+    pub root: PathBuf,
+    /// The executor program.
+    pub executor: PathBuf,
+    /// The program (and its arguments) that runs a controller: it gets the controller's own
+    /// arguments after these.
+    pub controller: Vec<String>,
+}
+
+/// How often an unconfirmed safe action is sent again (devices' lifecycle).
+const SAFE_RETRY_NS: u64 = 20_000_000;
+
+/// The kinds of faults injected on purpose, one at a time.
+const EVENTS: [Fault; 5] = [
+    Fault::Unplug,
+    Fault::ExecutorKill,
+    Fault::ControllerKill,
+    Fault::ControllerStall,
+    Fault::Flood,
+];
+
+/// A controller process.
+struct Ctl {
+    child: Child,
+    stdin: ChildStdin,
+    lines: Receiver<String>,
+}
+
+impl Ctl {
+    fn start(o: &Options, robot: &Robot, domain: &str, seed: u64) -> std::io::Result<Ctl> {
+        let (prog, pre) = o
+            .controller
+            .split_first()
+            .ok_or_else(|| std::io::Error::other("no controller program"))?;
+        let mut cmd = Command::new(prog);
+        cmd.args(pre)
+            .args(["--domain", domain, "--subsystem", &robot.subsystem])
+            .args([
+                "--rate-hz",
+                &o.rate_hz.to_string(),
+                "--seed",
+                &seed.to_string(),
+            ]);
+        for j in &robot.joints {
+            cmd.args(["--joint", &j.to_arg()]);
+        }
+        let mut child = cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).spawn()?;
+        let stdin = child.stdin.take().expect("piped");
+        let out = child.stdout.take().expect("piped");
+        let (tx, lines) = channel();
+        std::thread::spawn(move || {
+            for l in BufReader::new(out).lines().map_while(Result::ok) {
+                if tx.send(l).is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Ctl {
+            child,
+            stdin,
+            lines,
+        })
+    }
+
+    fn pid(&self) -> Pid {
+        Pid::from_raw(self.child.id() as i32)
+    }
+
+    /// Waits for its next `running` line.
+    fn running(&self, within: Duration) -> bool {
+        let end = Instant::now() + within;
+        while let Some(left) = end.checked_duration_since(Instant::now()) {
+            match self.lines.recv_timeout(left) {
+                Ok(l) if l == "running" => return true,
+                Ok(_) => {}
+                Err(_) => return false,
+            }
+        }
+        false
+    }
+
+    fn flood(&mut self, ms: u64) {
+        let _ = writeln!(self.stdin, "flood {ms}");
+        let _ = self.stdin.flush();
+    }
+
+    fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// One robot in the campaign.
+struct Member {
+    robot: Arc<Robot>,
+    watched: Arc<Mutex<Watched>>,
+    ctl: Option<Ctl>,
+    tally: report::Tally,
+}
+
+/// What the campaign holds while it runs.
+struct Campaign<'a> {
+    o: &'a Options,
+    launch: Launch,
+    domain: Domain,
+    members: Vec<Member>,
+    rng: Rng,
+    resources: report::Resources,
+    failures: Vec<String>,
+    last_sample: Instant,
+    started: Instant,
+}
+
+/// Runs a campaign.
+pub fn run(o: &Options) -> Result<Report, String> {
+    let dir = std::env::temp_dir().join(format!("conductor-soak-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let result = run_in(o, &dir);
+    let _ = std::fs::remove_dir_all(&dir);
+    result
+}
+
+fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
+    let dxl_link = dir.join("dxl0");
+    let can_link = dir.join("can0");
+    let io = |e: std::io::Error| e.to_string();
+    let dxl = Robot::dynamixel(&dxl_link, o.corrupt, o.drop, o.seed).map_err(io)?;
+    let can = Robot::mit_slcan(&can_link, o.corrupt, o.drop, o.seed ^ 0xCA).map_err(io)?;
+    let manifest = dir.join("soak.toml");
+    std::fs::write(
+        &manifest,
+        rig::manifest(&o.root, &dxl_link, &can_link).map_err(io)?,
+    )
+    .map_err(io)?;
+    let domain = Domain::unique("soak").map_err(|e| e.to_string())?;
+    let members: Vec<Member> = [dxl, can]
+        .into_iter()
+        .map(|r| Member {
+            tally: report::Tally::new(&r),
+            robot: Arc::new(r),
+            watched: Arc::new(Mutex::new(Watched::default())),
+            ctl: None,
+        })
+        .collect();
+    // Watching starts before the launch: bring-up writes to the devices too.
+    let stop = Arc::new(AtomicBool::new(false));
+    let eyes = monitor::spawn(
+        domain.clone(),
+        members
+            .iter()
+            .map(|m| (m.robot.clone(), m.watched.clone()))
+            .collect(),
+        stop.clone(),
+    );
+    let launch = Launch::start(
+        &manifest,
+        LaunchOptions {
+            executor: o.executor.clone(),
+            domain: Some(domain.name().into()),
+            no_rt: true,
+            quiet: true,
+            handle_signals: false,
+            backoff: Duration::from_millis(50),
+            backoff_max: Duration::from_millis(500),
+            // Only the campaign's kills (a few a minute) are expected; a crash of its own
+            // shows as a restart the campaign did not cause.
+            max_restarts: 50,
+            ..LaunchOptions::default()
+        },
+    );
+    let launch = match launch {
+        Ok(l) => l,
+        Err(e) => {
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            let _ = eyes.join();
+            return Err(format!("launch: {e}"));
+        }
+    };
+    let mut c = Campaign {
+        o,
+        launch,
+        domain,
+        members,
+        rng: Rng::new(o.seed ^ 0x50AC),
+        resources: report::Resources::default(),
+        failures: Vec::new(),
+        last_sample: Instant::now(),
+        started: Instant::now(),
+    };
+    let outcome = c.campaign();
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    let monitor = eyes
+        .join()
+        .map_err(|_| "the monitor panicked".to_string())?;
+    if let Err(e) = monitor {
+        c.failures.push(format!("monitor: {e}"));
+    }
+    if let Err(e) = outcome {
+        c.failures.push(e);
+    }
+    Ok(c.finish())
+}
+
+impl Campaign<'_> {
+    fn campaign(&mut self) -> Result<(), String> {
+        for i in 0..self.members.len() {
+            self.start_controller(i)?;
+        }
+        let end = self.started + self.o.duration;
+        'run: loop {
+            // Every kind for every robot, in a shuffled order, then again.
+            let mut plan: Vec<(usize, Fault)> = (0..self.members.len())
+                .flat_map(|m| EVENTS.iter().map(move |&f| (m, f)))
+                .collect();
+            for i in (1..plan.len()).rev() {
+                plan.swap(i, self.rng.below(i as u64 + 1) as usize);
+            }
+            for (m, f) in plan {
+                if Instant::now() + Duration::from_secs(3) > end {
+                    break 'run;
+                }
+                self.event(m, f)?;
+                let gap = 300 + self.rng.below(700);
+                self.idle(Duration::from_millis(gap));
+            }
+        }
+        self.sample_resources(true);
+        Ok(())
+    }
+
+    /// Waits, sampling what the processes hold.
+    fn idle(&mut self, d: Duration) {
+        let end = Instant::now() + d;
+        while Instant::now() < end {
+            if self.last_sample.elapsed() > Duration::from_secs(2) {
+                self.sample_resources(false);
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    fn sample_resources(&mut self, last: bool) {
+        self.last_sample = Instant::now();
+        let t = self.started.elapsed().as_secs_f64();
+        let mut pids = vec![("soak".to_string(), std::process::id())];
+        for m in &self.members {
+            if let Some(p) = self.launch.pid(&m.robot.subsystem) {
+                pids.push((format!("executor {}", m.robot.subsystem), p));
+            }
+        }
+        for (name, pid) in pids {
+            if let Some((rss, fds)) = procs::usage(pid) {
+                self.resources.sample(&name, pid, t, rss, fds);
+            }
+        }
+        let shm = procs::shm_entries(&self.domain.prefix(), &self.domain.root_path());
+
+        self.resources.shm(t, shm, last);
+    }
+
+    fn start_controller(&mut self, m: usize) -> Result<(), String> {
+        let seed = self.rng.next_u64();
+        let ctl = Ctl::start(self.o, &self.members[m].robot, self.domain.name(), seed)
+            .map_err(|e| format!("controller: {e}"))?;
+        if !ctl.running(Duration::from_secs(20)) {
+            ctl.kill();
+            return Err(format!(
+                "{}: a new controller could not enable the devices within 20 s",
+                self.members[m].robot.subsystem
+            ));
+        }
+        self.members[m].ctl = Some(ctl);
+        Ok(())
+    }
+
+    /// Waits until every joint of robot `m` has a sample without `STALE` taken after `t`.
+    fn fresh_after(&mut self, m: usize, t: u64, within: Duration) -> Option<u64> {
+        let end = Instant::now() + within;
+        while Instant::now() < end {
+            let w = lock(&self.members[m].watched);
+            if w.fresh_ns.iter().all(|&f| f > t) {
+                return Some(monotonic_ns());
+            }
+            drop(w);
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        None
+    }
+
+    fn event(&mut self, m: usize, f: Fault) -> Result<(), String> {
+        let name = self.members[m].robot.subsystem.clone();
+        eprintln!(
+            "soak: at {:.3} s: {name}: {}",
+            monotonic_ns() as f64 / 1e9,
+            f.name()
+        );
+        let recovery = match f {
+            Fault::Unplug => self.unplug(m),
+            Fault::ExecutorKill => self.kill_executor(m),
+            Fault::ControllerKill => self.controller_dies(m, false),
+            Fault::ControllerStall => self.controller_dies(m, true),
+            Fault::Flood => self.flood(m),
+            Fault::ByteFaults | Fault::BadSetpoints => unreachable!("not an event"),
+        };
+        let tally = &mut self.members[m].tally;
+        tally.injected(f);
+        match recovery {
+            Ok(ns) => tally.recovered(f, ns),
+            Err(why) => {
+                let text = format!("{name}: {}: {why}", f.name());
+                eprintln!("soak: {text}");
+                self.failures.push(text);
+            }
+        }
+        Ok(())
+    }
+
+    fn unplug(&mut self, m: usize) -> Result<u64, String> {
+        let r = self.members[m].robot.clone();
+        let t = monotonic_ns();
+        r.unplug();
+        // Samples taken from one tick and a reply timeout on cannot be fresh.
+        let window_from = t + 2 * r.tick_ns + 2_000_000;
+        lock(&self.members[m].watched)
+            .unplugged
+            .push((window_from, u64::MAX));
+        let out = 200 + self.rng.below(1300);
+        std::thread::sleep(Duration::from_millis(out));
+        let back = monotonic_ns();
+        {
+            let mut w = lock(&self.members[m].watched);
+            if let Some(last) = w.unplugged.last_mut() {
+                last.1 = back;
+            }
+            let n = w.unplugged.len();
+            if n > 16 {
+                w.unplugged.drain(..n - 16);
+            }
+        }
+        r.replug().map_err(|e| format!("replug: {e}"))?;
+        let done = self
+            .fresh_after(m, back, Duration::from_secs(15))
+            .ok_or("no fresh sample within 15 s of the replug")?;
+        Ok(done - back)
+    }
+
+    fn kill_executor(&mut self, m: usize) -> Result<u64, String> {
+        let sub = self.members[m].robot.subsystem.clone();
+        let pid = self.launch.pid(&sub).ok_or("no executor running")?;
+        let t = monotonic_ns();
+        kill(Pid::from_raw(pid as i32), Signal::SIGKILL).map_err(|e| e.to_string())?;
+        let done = self
+            .fresh_after(m, t, Duration::from_secs(20))
+            .ok_or("no fresh sample within 20 s of the kill")?;
+        if self.launch.pid(&sub) == Some(pid) {
+            return Err("fresh samples from a killed executor".into());
+        }
+        Ok(done - t)
+    }
+
+    /// The controller dies (or stalls): the safe state within the watchdog, kept until a
+    /// controller enables the robot again; the recovery is the time until it commands again.
+    fn controller_dies(&mut self, m: usize, stall: bool) -> Result<u64, String> {
+        let r = self.members[m].robot.clone();
+        // A controller that never commanded leaves no watchdog to fire: first see its frames
+        // applied.
+        let frames0 = lock(&self.members[m].watched).counted().frames_applied;
+        let until = Instant::now() + Duration::from_secs(5);
+        while lock(&self.members[m].watched).counted().frames_applied <= frames0 {
+            if Instant::now() > until {
+                return Err("its controller's frames are not applied".into());
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let ctl = self.members[m].ctl.take().ok_or("no controller")?;
+        let (down0, trips0, tripped0) = {
+            let w = lock(&self.members[m].watched);
+            let tripped = w
+                .flags
+                .iter()
+                .all(|f| f & conductor_bus::status::TRIPPED != 0);
+            (w.injected_down, w.counted().watchdog_trips, tripped)
+        };
+        let t = monotonic_ns();
+        let sig = if stall {
+            Signal::SIGSTOP
+        } else {
+            Signal::SIGKILL
+        };
+        kill(ctl.pid(), sig).map_err(|e| e.to_string())?;
+        {
+            let mut w = lock(&self.members[m].watched);
+            w.armed_ns = Some(t);
+            w.safe_ns = None;
+            w.hold_from_ns = None;
+        }
+        // Safe, and still safe when the watchdog must have fired.
+        let fired = t + r.watchdog_ns + 2 * r.tick_ns;
+        let wait_until =
+            Instant::now() + Duration::from_nanos(r.watchdog_ns) + Duration::from_secs(3);
+        let safe = loop {
+            let s = lock(&self.members[m].watched).safe_ns;
+            if (s.is_some() && monotonic_ns() >= fired) || Instant::now() > wait_until {
+                break s;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        };
+        let mut result = Ok(0);
+        let w = lock(&self.members[m].watched);
+        let lateness = w.counted().lateness_max_ns;
+        // Requests lost on the way down (the safe command among them) are sent again, 20 ms
+        // later (the lifecycle's safe-action retry).
+        let lost_down = w.injected_down - down0;
+        drop(w);
+        let limit =
+            r.watchdog_ns + 2 * r.tick_ns + lateness + 2_000_000 + lost_down * SAFE_RETRY_NS;
+        match safe {
+            None => {
+                lock(&self.members[m].watched).unsafe_events += 1;
+                result = Err("never reached its safe state".to_string());
+            }
+            Some(s) => {
+                let took = s - t;
+                self.members[m]
+                    .tally
+                    .safe(took, r.watchdog_ns + r.tick_ns, took <= limit);
+                if took > limit {
+                    result = Err(format!(
+                        "safe state after {:.1} ms (limit {:.1} ms: watchdog, 2 ticks, the worst tick lateness, 2 ms, {} lost requests)",
+                        took as f64 / 1e6,
+                        limit as f64 / 1e6,
+                        lost_down
+                    ));
+                }
+            }
+        }
+        // It must stay safe while nobody commands it.
+        lock(&self.members[m].watched).hold_from_ns = Some(monotonic_ns());
+        let dead = 300 + self.rng.below(300);
+        self.idle(Duration::from_millis(dead));
+        {
+            let mut w = lock(&self.members[m].watched);
+            w.armed_ns = None;
+            w.hold_from_ns = None;
+            w.safe_ns = None;
+            if w.counted().watchdog_trips == trips0 && !tripped0 {
+                drop(w);
+                self.members[m].tally.death_uncounted();
+            }
+        }
+        let back = Instant::now();
+        if stall {
+            kill(ctl.pid(), Signal::SIGCONT).map_err(|e| e.to_string())?;
+            if !ctl.running(Duration::from_secs(20)) {
+                ctl.kill();
+                self.start_controller(m)?;
+                return Err("the continued controller could not enable the devices again".into());
+            }
+            self.members[m].ctl = Some(ctl);
+        } else {
+            ctl.kill();
+            self.start_controller(m)?;
+        }
+        result.map(|_| back.elapsed().as_nanos() as u64)
+    }
+
+    fn flood(&mut self, m: usize) -> Result<u64, String> {
+        let sub = self.members[m].robot.subsystem.clone();
+        let pid = self.launch.pid(&sub);
+        let ms = 100 + self.rng.below(200);
+        self.members[m]
+            .ctl
+            .as_mut()
+            .ok_or("no controller")?
+            .flood(ms);
+        std::thread::sleep(Duration::from_millis(ms + 20));
+        let t = monotonic_ns();
+        let done = self
+            .fresh_after(m, t, Duration::from_secs(10))
+            .ok_or("no fresh sample within 10 s of a flood")?;
+        if self.launch.pid(&sub) != pid {
+            return Err("the executor did not survive the flood".into());
+        }
+        Ok(done - t)
+    }
+
+    fn finish(mut self) -> Report {
+        for m in self.members.iter_mut() {
+            if let Some(c) = m.ctl.take() {
+                c.kill();
+            }
+        }
+        let infos = self.launch.executors();
+        self.launch.stop();
+        let stopped = self.launch.wait();
+        let mut robots = Vec::new();
+        for m in &self.members {
+            let w = lock(&m.watched);
+            let restarts = infos
+                .iter()
+                .find(|e| e.subsystem == m.robot.subsystem)
+                .map_or(0, |e| e.restarts as u64);
+            robots.push(m.tally.report(&m.robot, &w, restarts));
+        }
+        if let Err(e) = stopped {
+            self.failures
+                .push(format!("the launch did not stop cleanly: {e}"));
+        }
+        // What the domain still holds once everything stopped: the segments of processes
+        // that were killed (nobody is left to clean up after them). The campaign's domain is
+        // its own: removed.
+        std::thread::sleep(Duration::from_millis(200));
+        let left = procs::shm_entries(&self.domain.prefix(), &self.domain.root_path());
+        self.resources.left_after_stop = left.len() as u64;
+        for f in &left {
+            let _ = std::fs::remove_file(f);
+        }
+        let _ = std::fs::remove_dir_all(self.domain.root_path());
+        Report::new(
+            self.o,
+            self.started.elapsed(),
+            robots,
+            std::mem::take(&mut self.resources),
+            std::mem::take(&mut self.failures),
+        )
+    }
+}
