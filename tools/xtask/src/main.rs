@@ -409,7 +409,11 @@ fn test() -> Result {
             "build",
         ],
     )?;
-    cargo(&root, &env, &["test", "--workspace", "--locked", "--no-fail-fast"])?;
+    cargo(
+        &root,
+        &env,
+        &["test", "--workspace", "--locked", "--no-fail-fast"],
+    )?;
     // Score's algorithm tests again with its f32 number type.
     cargo(
         &root,
