@@ -400,7 +400,7 @@ impl Supervisor {
                 c.subsystem,
                 g.port.display()
             ),
-            Role::Executor => {}
+            Role::Executor | Role::View(_) => {}
         }
         self.set_info(i, Some(pid), false);
         Ok(())
