@@ -26,9 +26,7 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crate::cleanup::{executor_node_name, gateway_node_name, scan_and_clean};
-use crate::manifest::{
-    GatewayDef, GatewayKind, Manifest, ManifestError, ViewDef, BRIDGE_NAME,
-};
+use crate::manifest::{GatewayDef, GatewayKind, Manifest, ManifestError, ViewDef, BRIDGE_NAME};
 use crate::process::resolve_domain;
 use crate::signals::{self, Stop};
 use supervisor::Supervisor;
