@@ -37,13 +37,28 @@ const INBOUND_QUEUE: usize = 16_384;
 /// Frames queued for the link (commands are reliable on the link, bounded here).
 pub(crate) const OUTBOUND_COMMANDS: usize = 32;
 
-/// A message from Zenoh, tagged with the import rule whose subscriber got it.
+/// A message from Zenoh, tagged with the import rule whose subscriber got it. The sample itself
+/// is moved through the queue (its key and buffers are reference-counted): no copy and no
+/// allocation per message between Zenoh's thread and this one.
 pub(crate) struct Inbound {
     rule: usize,
     what: What,
-    key: String,
-    payload: Vec<u8>,
-    attachment: Option<Vec<u8>>,
+    sample: zenoh::sample::Sample,
+}
+
+impl Inbound {
+    fn key(&self) -> &str {
+        self.sample.key_expr().as_str()
+    }
+
+    /// The payload; borrowed when it arrived in one piece (a 48-byte sample always does).
+    fn payload(&self) -> std::borrow::Cow<'_, [u8]> {
+        self.sample.payload().to_bytes()
+    }
+
+    fn attachment(&self) -> Option<std::borrow::Cow<'_, [u8]>> {
+        self.sample.attachment().map(|a| a.to_bytes())
+    }
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -118,15 +133,9 @@ fn enqueue(
     counters: &Counters,
     rule: usize,
     what: What,
-    s: &zenoh::sample::Sample,
+    sample: zenoh::sample::Sample,
 ) {
-    let m = Inbound {
-        rule,
-        what,
-        key: s.key_expr().as_str().to_string(),
-        payload: s.payload().to_bytes().into_owned(),
-        attachment: s.attachment().map(|a| a.to_bytes().into_owned()),
-    };
+    let m = Inbound { rule, what, sample };
     if let Err(TrySendError::Full(_)) = tx.try_send(m) {
         Counters::bump(&counters.overflow);
     }
@@ -155,7 +164,7 @@ impl Importer {
                 let (tx, c) = (tx.clone(), counters.clone());
                 subs.push(
                     zs.declare_subscriber(key)
-                        .callback(move |s| enqueue(&tx, &c, i, what, &s))
+                        .callback(move |s| enqueue(&tx, &c, i, what, s))
                         .wait()
                         .map_err(zenoh("declaring an import subscriber"))?,
                 );
@@ -199,7 +208,7 @@ impl Importer {
             .get(key)
             .callback(move |reply| {
                 if let Ok(s) = reply.result() {
-                    enqueue(&tx, &c, rule, What::Catalog, s);
+                    enqueue(&tx, &c, rule, What::Catalog, s.clone());
                 }
             })
             .wait();
@@ -237,7 +246,7 @@ impl Importer {
                 warn!(
                     "dropped a malformed or foreign message on {}: {why} ({n} malformed so far, \
                      {held} not logged)",
-                    m.key
+                    m.key()
                 );
             }
         }
@@ -250,14 +259,14 @@ impl Importer {
     }
 
     fn on_heartbeat(&mut self, m: &Inbound) -> std::result::Result<(), Malformed> {
-        let hb = Heartbeat::decode(&m.payload)?;
+        let hb = Heartbeat::decode(&m.payload())?;
         // conductor/<domain>/@bridge/<host>/hb
         let host = m
-            .key
+            .key()
             .rsplit('/')
             .nth(1)
             .filter(|h| wire::valid_host(h))
-            .ok_or_else(|| Malformed::Key(m.key.clone()))?
+            .ok_or_else(|| Malformed::Key(m.key().to_string()))?
             .to_string();
         let now = Instant::now();
         let (rule, domain) = (m.rule, self.rules[m.rule].domain.clone());
@@ -295,7 +304,7 @@ impl Importer {
     }
 
     fn on_catalog(&mut self, m: &Inbound) -> std::result::Result<(), Malformed> {
-        let c = Catalog::decode(&m.payload)?;
+        let c = Catalog::decode(&m.payload())?;
         let rule = m.rule;
         let i = match self.remote(rule, &c.host) {
             Some(i) => i,
@@ -434,9 +443,9 @@ impl Importer {
 
     fn on_sample(&mut self, m: &Inbound) -> std::result::Result<(), Malformed> {
         let rule = m.rule;
-        let (sub, state) = wire::split_state_key(&self.rules[rule].domain, &m.key)?;
-        let env = Envelope::decode(m.attachment.as_deref().ok_or(Malformed::Envelope)?)?;
-        let s = wire::decode_sample(&m.payload)?;
+        let (sub, state) = wire::split_state_key(&self.rules[rule].domain, m.key())?;
+        let env = Envelope::decode(&m.attachment().ok_or(Malformed::Envelope)?)?;
+        let s = wire::decode_sample(&m.payload())?;
         let Some(i) = self.remote(rule, &env.host) else {
             return self.unknown(&env.host, sub, state, "no catalog from that host yet");
         };

@@ -801,3 +801,311 @@ fn launch_runs_and_supervises_the_bridge_of_a_manifest() {
     assert!(out.contains("bridge started"), "{out}");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The leg executor launched in a fresh domain `a`, and a second fresh domain `b`.
+struct Leg {
+    a: Domain,
+    b: Domain,
+    dir: std::path::PathBuf,
+    bus_a: Bus,
+    bus_b: Bus,
+    _launcher: Proc,
+}
+
+fn launch_leg(tag: &str) -> Leg {
+    let a = Domain::unique(&format!("{tag}a")).unwrap();
+    let b = Domain::unique(&format!("{tag}b")).unwrap();
+    let dir = tempdir(tag);
+    let m = dir.join("leg.toml");
+    std::fs::write(&m, manifest()).unwrap();
+    let launcher = Proc::spawn(
+        conductor(&a)
+            .arg("launch")
+            .arg(&m)
+            .args(["--no-rt", "--quiet"]),
+    );
+    let bus_a = Bus::open(&a, "test-a").unwrap();
+    let bus_b = Bus::open(&b, "test-b").unwrap();
+    wait_listed(&bus_a, "leg/knee", Duration::from_secs(30));
+    Leg {
+        a,
+        b,
+        dir,
+        bus_a,
+        bus_b,
+        _launcher: launcher,
+    }
+}
+
+impl Leg {
+    /// The mirror of the knee appears in `b`, a setpoint sent there reaches the owner in `a`
+    /// and comes back mirrored.
+    fn states_flow_and_commands_go_back(&self, value: f64) {
+        wait_listed(&self.bus_b, "leg/knee", Duration::from_secs(20));
+        let mut a_knee = StateSubscriber::with_buffer(&self.bus_a, "leg/knee", 256).unwrap();
+        let mut b_knee = StateSubscriber::with_buffer(&self.bus_b, "leg/knee", 256).unwrap();
+        wait_sample(&mut b_knee, Duration::from_secs(5), "a fresh mirror", |s| {
+            s.status & status::STALE == 0
+        });
+        ok(conductor(&self.b).args(["set", "leg/knee", &value.to_string()]));
+        wait_sample(
+            &mut a_knee,
+            Duration::from_secs(5),
+            "setpoint at the owner",
+            |s| s.value == value,
+        );
+        wait_sample(
+            &mut b_knee,
+            Duration::from_secs(5),
+            "setpoint mirrored",
+            |s| s.value == value,
+        );
+    }
+}
+
+/// A CA written as `<name>.pem` in `dir`.
+fn make_ca(dir: &std::path::Path, name: &str) -> rcgen::CertifiedIssuer<'static, rcgen::KeyPair> {
+    let mut p = rcgen::CertificateParams::new(Vec::<String>::new()).unwrap();
+    p.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Unconstrained);
+    p.distinguished_name
+        .push(rcgen::DnType::CommonName, format!("{name} CA"));
+    let ca = rcgen::CertifiedIssuer::self_signed(p, rcgen::KeyPair::generate().unwrap()).unwrap();
+    std::fs::write(dir.join(format!("{name}.pem")), ca.pem()).unwrap();
+    ca
+}
+
+/// A certificate for `localhost` with common name `cn`, signed by `ca`, written as
+/// `<file>.pem` and `<file>-key.pem` in `dir`.
+fn make_cert(
+    dir: &std::path::Path,
+    ca: &rcgen::CertifiedIssuer<'static, rcgen::KeyPair>,
+    cn: &str,
+    file: &str,
+) {
+    let mut p =
+        rcgen::CertificateParams::new(vec!["localhost".to_string(), "127.0.0.1".into()]).unwrap();
+    p.distinguished_name.push(rcgen::DnType::CommonName, cn);
+    let key = rcgen::KeyPair::generate().unwrap();
+    let cert = p.signed_by(&key, ca).unwrap();
+    std::fs::write(dir.join(format!("{file}.pem")), cert.pem()).unwrap();
+    std::fs::write(dir.join(format!("{file}-key.pem")), key.serialize_pem()).unwrap();
+}
+
+/// A Zenoh client session to `endpoint` trusting `ca.pem` in `dir`, presenting `<cert>.pem`
+/// when given.
+fn tls_client(
+    dir: &std::path::Path,
+    endpoint: &str,
+    cert: Option<&str>,
+) -> zenoh::Result<zenoh::Session> {
+    let mut c = zenoh::Config::default();
+    let q = |p: std::path::PathBuf| format!("{:?}", p.display().to_string());
+    c.insert_json5("mode", "\"client\"").unwrap();
+    c.insert_json5("connect/endpoints", &format!("[{endpoint:?}]"))
+        .unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    c.insert_json5(
+        "transport/link/tls/root_ca_certificate",
+        &q(dir.join("ca.pem")),
+    )
+    .unwrap();
+    if let Some(cert) = cert {
+        // (A Zenoh client presents its certificate only with mTLS enabled.)
+        c.insert_json5("transport/link/tls/enable_mtls", "true")
+            .unwrap();
+        c.insert_json5(
+            "transport/link/tls/connect_certificate",
+            &q(dir.join(format!("{cert}.pem"))),
+        )
+        .unwrap();
+        c.insert_json5(
+            "transport/link/tls/connect_private_key",
+            &q(dir.join(format!("{cert}-key.pem"))),
+        )
+        .unwrap();
+    }
+    zenoh::open(c).wait()
+}
+
+/// deploy/two-host/zenoh-tls.json5 with the certificates made here: the robot's bridge runs
+/// with it over mutual TLS and its access control, the workstation's with its own certificate.
+/// Certificates of another CA, or none, are refused; the access control lets the leg's command
+/// key in and nothing else of `@cmd`.
+#[test]
+fn mutual_tls_and_access_control_of_the_two_host_example() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let leg = launch_leg("brtls");
+    let dir = &leg.dir;
+    let ca = make_ca(dir, "ca");
+    make_cert(dir, &ca, "robot", "robot");
+    make_cert(dir, &ca, "workstation", "workstation");
+    // Same common name, another CA.
+    let rogue = make_ca(dir, "rogue-ca");
+    make_cert(dir, &rogue, "workstation", "rogue");
+
+    let example = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../deploy/two-host/zenoh-tls.json5"
+    ))
+    .unwrap();
+    let example = example
+        .replace("/etc/conductor/tls/", &format!("{}/", dir.display()))
+        .replace("conductor/robot/", &format!("conductor/{}/", leg.a.name()));
+    assert!(example.contains("enable_mtls: true"), "{example}");
+    let robot_cfg = dir.join("robot.json5");
+    std::fs::write(&robot_cfg, &example).unwrap();
+    // The workstation: the same file with its own certificate and without the robot's access
+    // control (see the file's header).
+    let ws = example
+        .replace("robot.pem", "workstation.pem")
+        .replace("robot-key.pem", "workstation-key.pem")
+        .replace(
+            "access_control: {\n    enabled: true",
+            "access_control: {\n    enabled: false",
+        );
+    assert!(ws.contains("enabled: false"), "{ws}");
+    let ws_cfg = dir.join("workstation.json5");
+    std::fs::write(&ws_cfg, &ws).unwrap();
+
+    let port = free_tcp_ports(2);
+    let robot_ep = format!("tls/localhost:{port}");
+    let hb = HEARTBEAT_MS.to_string();
+    let robot = Proc::spawn(conductor(&leg.a).args([
+        "bridge",
+        "--host",
+        "robot",
+        "--zenoh-config",
+        robot_cfg.to_str().unwrap(),
+        "--listen",
+        &robot_ep,
+        "--export",
+        "leg/*",
+        "--commands",
+        "leg/knee",
+        "--heartbeat-ms",
+        &hb,
+    ]));
+    robot.wait_line("ready bridge robot", Duration::from_secs(30));
+    let workstation = Proc::spawn(conductor(&leg.b).args([
+        "bridge",
+        "--host",
+        "workstation",
+        "--zenoh-config",
+        ws_cfg.to_str().unwrap(),
+        "--connect",
+        &robot_ep,
+        "--listen",
+        &format!("tls/localhost:{}", port + 1),
+        "--import",
+        leg.a.name(),
+        "--heartbeat-ms",
+        &hb,
+    ]));
+    workstation.wait_line("ready bridge workstation", Duration::from_secs(30));
+    leg.states_flow_and_commands_go_back(0.5);
+
+    // A certificate of another CA, or none, is refused by the robot's listener.
+    assert!(tls_client(dir, &robot_ep, Some("rogue")).is_err());
+    assert!(tls_client(dir, &robot_ep, None).is_err());
+
+    // The workstation's certificate: states come in; of the command keys only the leg's reaches
+    // the robot's bridge (which counts the junk sent there as malformed); `@cmd/arm` is denied.
+    let s = tls_client(dir, &robot_ep, Some("workstation")).unwrap_or_else(|e| {
+        panic!(
+            "a valid client certificate: {e}; robot: {}",
+            robot.stderr.lock().unwrap()
+        )
+    });
+    let sub = s
+        .declare_subscriber(format!("conductor/{}/leg/knee", leg.a.name()))
+        .wait()
+        .unwrap();
+    let got = sub.recv_timeout(Duration::from_secs(5)).unwrap();
+    assert!(got.is_some(), "no state over mutual TLS");
+    for _ in 0..3 {
+        s.put(
+            format!("conductor/{}/@cmd/leg", leg.a.name()),
+            b"junk".to_vec(),
+        )
+        .wait()
+        .unwrap();
+    }
+    for _ in 0..5 {
+        s.put(
+            format!("conductor/{}/@cmd/arm", leg.a.name()),
+            b"junk".to_vec(),
+        )
+        .wait()
+        .unwrap();
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    drop(sub);
+    s.close().wait().unwrap();
+    let ws_summary = workstation.stop();
+    let summary = robot.stop();
+    assert_eq!(
+        counter(&summary, "malformed"),
+        3,
+        "{summary}\nworkstation: {ws_summary}"
+    );
+}
+
+/// A Zenoh router (what zenohd runs) between two bridges in client mode that connect only to
+/// it: states flow and commands go back.
+#[test]
+fn through_a_zenoh_router_with_bridges_in_client_mode() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let leg = launch_leg("brrt");
+    let port = free_tcp_ports(1);
+    let ep = format!("tcp/127.0.0.1:{port}");
+    let mut c = zenoh::Config::default();
+    c.insert_json5("mode", "\"router\"").unwrap();
+    c.insert_json5("listen/endpoints", &format!("[{ep:?}]"))
+        .unwrap();
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    let router = zenoh::open(c).wait().expect("router");
+
+    let client = leg.dir.join("client.json5");
+    std::fs::write(
+        &client,
+        format!(
+            "{{ mode: \"client\", connect: {{ endpoints: [{ep:?}] }}, \
+             scouting: {{ multicast: {{ enabled: false }} }} }}"
+        ),
+    )
+    .unwrap();
+    let hb = HEARTBEAT_MS.to_string();
+    let cfg = client.to_str().unwrap();
+    let exporter = Proc::spawn(conductor(&leg.a).args([
+        "bridge",
+        "--host",
+        "hosta",
+        "--zenoh-config",
+        cfg,
+        "--export",
+        "leg/*",
+        "--commands",
+        "leg/knee",
+        "--heartbeat-ms",
+        &hb,
+    ]));
+    exporter.wait_line("ready bridge hosta", Duration::from_secs(30));
+    let importer = Proc::spawn(conductor(&leg.b).args([
+        "bridge",
+        "--host",
+        "hostb",
+        "--zenoh-config",
+        cfg,
+        "--import",
+        leg.a.name(),
+        "--heartbeat-ms",
+        &hb,
+    ]));
+    importer.wait_line("ready bridge hostb", Duration::from_secs(30));
+    leg.states_flow_and_commands_go_back(-0.25);
+    importer.stop();
+    exporter.stop();
+    router.close().wait().unwrap();
+}
