@@ -10,11 +10,13 @@
 //! * [`alloc`] — a counting global allocator, to prove that a real-time path allocates nothing.
 //! * [`can_vm`] — Debian's kernel booted in QEMU with the host's file system shared, for tests
 //!   that need a real Linux CAN stack (vcan, slcan) the build machine's kernel lacks.
+//! * [`fuzz`] — the fuzz targets' seed and regression corpora replayed as an ordinary test.
 
 use std::path::PathBuf;
 
 pub mod alloc;
 pub mod can_vm;
+pub mod fuzz;
 
 /// The workspace root.
 pub fn workspace() -> PathBuf {
