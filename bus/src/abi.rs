@@ -43,19 +43,21 @@ pub mod status {
     /// its `enable` state is set to 1.
     pub const TRIPPED: u32 = 1 << 8;
 
+    /// The name of every flag, in bit order (bit `i` is `NAMES[i]`).
+    pub const NAMES: [&str; 9] = [
+        "stale",
+        "clamped",
+        "rejected",
+        "watchdog",
+        "device-fault",
+        "replayed",
+        "simulated",
+        "disabled",
+        "tripped",
+    ];
+
     /// Human-readable names of the flags set in `status`, in bit order.
     pub fn names(status: u32) -> impl Iterator<Item = &'static str> {
-        const NAMES: [&str; 9] = [
-            "stale",
-            "clamped",
-            "rejected",
-            "watchdog",
-            "device-fault",
-            "replayed",
-            "simulated",
-            "disabled",
-            "tripped",
-        ];
         NAMES
             .iter()
             .enumerate()

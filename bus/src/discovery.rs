@@ -34,6 +34,23 @@ impl StateInfo {
         format!("{}/{}", self.subsystem, self.name)
     }
 
+    /// Its metadata as strings, one entry per attribute plus `subsystem` and `state`: what a
+    /// recording's channel and a live view's channel carry.
+    pub fn metadata_strings(&self) -> std::collections::BTreeMap<String, String> {
+        let m = &self.meta;
+        std::collections::BTreeMap::from([
+            ("subsystem".into(), self.subsystem.clone()),
+            ("state".into(), self.name.clone()),
+            ("index".into(), m.index.to_string()),
+            ("units".into(), m.units.clone()),
+            ("writable".into(), m.writable.to_string()),
+            ("rate_hz".into(), m.rate_hz.to_string()),
+            ("min".into(), m.min.to_string()),
+            ("max".into(), m.max.to_string()),
+            ("device".into(), m.device.clone()),
+        ])
+    }
+
     /// The iceoryx2 service name.
     pub fn service_name(&self) -> String {
         naming::state(&self.subsystem, &self.name)

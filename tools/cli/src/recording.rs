@@ -136,18 +136,7 @@ pub fn topic(subsystem: &str, state: &str) -> String {
 
 /// Channel metadata of a state: its bus metadata as strings.
 pub fn channel_metadata(info: &StateInfo) -> BTreeMap<String, String> {
-    let m = &info.meta;
-    BTreeMap::from([
-        ("subsystem".into(), info.subsystem.clone()),
-        ("state".into(), info.name.clone()),
-        ("index".into(), m.index.to_string()),
-        ("units".into(), m.units.clone()),
-        ("writable".into(), m.writable.to_string()),
-        ("rate_hz".into(), m.rate_hz.to_string()),
-        ("min".into(), m.min.to_string()),
-        ("max".into(), m.max.to_string()),
-        ("device".into(), m.device.clone()),
-    ])
+    info.metadata_strings()
 }
 
 /// A recorded channel, as `replay` and `plot` see it.

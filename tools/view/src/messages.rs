@@ -21,17 +21,7 @@ pub const SCHEMA_ENCODING: &str = "jsonschema";
 pub const MESSAGE_ENCODING: &str = "json";
 
 /// The names of the status bits, in bit order (the `flags` object has one boolean per name).
-pub const FLAG_NAMES: [&str; 9] = [
-    "stale",
-    "clamped",
-    "rejected",
-    "watchdog",
-    "device-fault",
-    "replayed",
-    "simulated",
-    "disabled",
-    "tripped",
-];
+pub use conductor_bus::status::NAMES as FLAG_NAMES;
 
 const TIME: &str = r#"{
       "type": "object",
@@ -273,18 +263,7 @@ pub fn stats_topic(subsystem: &str) -> String {
 
 /// Channel metadata of a state: its bus metadata as strings.
 pub fn state_metadata(info: &StateInfo) -> BTreeMap<String, String> {
-    let m = &info.meta;
-    BTreeMap::from([
-        ("subsystem".into(), info.subsystem.clone()),
-        ("state".into(), info.name.clone()),
-        ("index".into(), m.index.to_string()),
-        ("units".into(), m.units.clone()),
-        ("writable".into(), m.writable.to_string()),
-        ("rate_hz".into(), m.rate_hz.to_string()),
-        ("min".into(), m.min.to_string()),
-        ("max".into(), m.max.to_string()),
-        ("device".into(), m.device.clone()),
-    ])
+    info.metadata_strings()
 }
 
 /// What a client may publish on a settable state's topic: `{"value": x}` (other fields, such as
