@@ -236,10 +236,12 @@ impl Recording {
 
     /// Reads a recording already in memory; `path` names it in errors. As [`Recording::load`].
     ///
-    /// A file that makes the `mcap` reader panic is refused like any malformed file: mcap 0.26's
-    /// `MessageStream` sets no record length limit, and a record length near `u64::MAX`
-    /// overflows its arithmetic (found by the `recording` fuzz target; kept in
-    /// `fuzz/regressions/recording/`).
+    /// Records are read with a length limit ([`record_length_limit`]), so a damaged length is
+    /// an error before the reader allocates: mcap 0.26's `MessageStream` sets none, and a
+    /// record length near `u64::MAX` inside a chunk overflowed its arithmetic or asked for an
+    /// impossible allocation, which aborts the process (both found by the `recording` fuzz
+    /// target; kept in `fuzz/regressions/recording/`). A file that still makes the reader panic
+    /// is refused like any malformed file.
     pub fn from_bytes(path: &Path, buf: &[u8]) -> Result<Self> {
         std::panic::catch_unwind(|| Self::parse(path, buf)).unwrap_or_else(|_| {
             Err(CliError::BadRecording {
@@ -250,9 +252,10 @@ impl Recording {
     }
 
     fn parse(path: &Path, buf: &[u8]) -> Result<Self> {
-        let stream =
-            mcap::MessageStream::new_with_options(buf, mcap::read::Options::IgnoreEndMagic.into())
-                .map_err(|e| CliError::mcap(path, e))?;
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_skip_end_magic(true)
+            .with_record_length_limit(record_length_limit(buf.len()));
+        let stream = mcap::io::MessageReader::new_with_options(std::io::Cursor::new(buf), options);
         let mut rec = Recording::default();
         let mut ids: BTreeMap<u16, u16> = BTreeMap::new();
         for m in stream {
@@ -296,6 +299,16 @@ impl Recording {
         rec.samples.sort_by_key(|s| s.t_ns);
         Ok(rec)
     }
+}
+
+/// The longest record (or chunk padding, or buffered compressed input) read from a file of
+/// `file_len` bytes. A record outside a chunk cannot be longer than the file; one inside a
+/// compressed chunk can (a truncated recording's first chunk holds the ~2 KB schema in fewer
+/// bytes), so the limit is never below 16 MiB, far above any record Conductor writes (a
+/// message is ~150 bytes). It bounds what the reader allocates for a damaged length.
+pub fn record_length_limit(file_len: usize) -> usize {
+    const MIN: usize = 16 << 20;
+    file_len.max(MIN)
 }
 
 #[cfg(test)]
@@ -399,6 +412,56 @@ mod tests {
         assert_eq!(
             off, 0,
             "{off} of 200000 doubles did not come back bit for bit"
+        );
+    }
+
+    /// `magic, header, chunk(records), data end` with an uncompressed chunk of `records`
+    /// (`compressed_size` as given).
+    fn file_with_chunk(records: &[u8], compressed_size: u64) -> Vec<u8> {
+        let mut f = b"\x89MCAP0\r\n".to_vec();
+        // Header: empty profile and library.
+        f.push(0x01);
+        f.extend(8u64.to_le_bytes());
+        f.extend([0; 8]);
+        let mut chunk = Vec::new();
+        chunk.extend([0; 8 + 8]); // message start and end time
+        chunk.extend((records.len() as u64).to_le_bytes()); // uncompressed size
+        chunk.extend([0; 4 + 4]); // uncompressed crc (none), compression "" (none)
+        chunk.extend(compressed_size.to_le_bytes());
+        chunk.extend(records);
+        f.push(0x06);
+        f.extend((chunk.len() as u64).to_le_bytes());
+        f.extend(chunk);
+        f.push(0x0f); // data end, crc 0
+        f.extend(4u64.to_le_bytes());
+        f.extend([0; 4]);
+        f
+    }
+
+    #[test]
+    fn damaged_record_lengths_are_refused_not_a_crash() {
+        let path = Path::new("damaged.mcap");
+        // A record in a chunk whose length is near u64::MAX: refused by the length limit.
+        let mut huge = vec![0x03];
+        huge.extend((u64::MAX - 3).to_le_bytes());
+        let err = Recording::from_bytes(path, &file_with_chunk(&huge, huge.len() as u64));
+        assert!(
+            matches!(&err, Err(CliError::Mcap { detail, .. }) if detail.contains("exceeds limit")),
+            "{err:?}"
+        );
+        // A record (29 bytes) longer than its chunk says it holds (14): within the limit, and
+        // mcap 0.26 overflows subtracting it from the chunk's remainder (a panic in a debug
+        // build), which `from_bytes` refuses like any malformed file.
+        let mut overrun = vec![0x03];
+        overrun.extend(20u64.to_le_bytes());
+        overrun.extend([0; 20]);
+        let err = Recording::from_bytes(path, &file_with_chunk(&overrun, 14));
+        assert!(
+            matches!(
+                &err,
+                Err(CliError::BadRecording { .. } | CliError::Mcap { .. })
+            ),
+            "{err:?}"
         );
     }
 }
