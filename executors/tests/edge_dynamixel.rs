@@ -336,6 +336,54 @@ fn the_watchdog_trips_setpoints_are_refused_until_enable_from_where_it_is() {
     assert!(exec.stop().success());
 }
 
+/// An executor that does not run for longer than its watchdog (descheduled on a loaded machine;
+/// here stopped with SIGSTOP) trips on its first tick back. Its hold must be where the servo is
+/// then, not where it was last read before the pause: the servo kept moving to its last goal
+/// meanwhile, and a hold written from the old reading sent it back there (the soak's one
+/// unsafe stop). It reads the position again first.
+#[test]
+fn a_hold_after_the_executor_did_not_run_holds_where_the_servo_is() {
+    let cfg = DxlSimConfig {
+        tau_s: 0.4,
+        ..ids(1)
+    };
+    let (sim, port) = bus("stalehold", cfg);
+    let (r, d) = start("stalehold", &manifest(&port, 1, "watchdog_ms = 150", ""));
+    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "arm/p1");
+    p1.until(5.0, "enabled", |s| {
+        s.status & (status::DISABLED | status::TRIPPED | status::STALE) == 0
+    });
+    let raw = |rad: f64| 2048 + (rad / PULSE).round() as i32;
+    // One frame: it starts moving to 0.8 rad (slowly: tau 0.4 s).
+    send(&mut ctl, &[("arm/p1", 0.8)]);
+    eventually(2, "the goal written", || {
+        ((sim.sim().servo(1).unwrap().goal_position() - raw(0.8)).abs() <= 1).then_some(())
+    });
+    std::thread::sleep(Duration::from_millis(30));
+    let pid = nix::unistd::Pid::from_raw(exec.pid() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).unwrap();
+    let before = sim.sim().servo(1).unwrap().present_position();
+    // The servo moves on while the executor does not run, far longer than the watchdog.
+    std::thread::sleep(Duration::from_millis(1000));
+    let there = sim.sim().servo(1).unwrap().present_position();
+    assert!(there - before > 300, "it moved on: {before} → {there}");
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).unwrap();
+    p1.until(2.0, "tripped", |s| {
+        s.status & (status::WATCHDOG | status::TRIPPED) == status::WATCHDOG | status::TRIPPED
+    });
+    exec.wait_log(2, "safe action confirmed on the wire");
+    let servo = sim.sim().servo(1).unwrap().clone();
+    let (goal, now) = (servo.goal_position(), servo.present_position());
+    assert!(
+        (goal - now).abs() <= 4 && goal >= there,
+        "held at {goal} while the servo stood at {now} (at {there} when the executor came back, {before} when it stopped)"
+    );
+    assert!(exec.stop().success());
+}
+
 #[test]
 fn an_unplugged_port_is_reopened_and_the_servos_resume_without_a_restart() {
     let (sim, port) = bus("unplug", ids(2));

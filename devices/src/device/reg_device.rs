@@ -32,6 +32,10 @@ use crate::stage::{Channel, Device, SafeAction, TickCtx};
 const EXPECT: usize = 48;
 /// A rebooting servo is probed again after this long (ns).
 const BOOT_NS: u64 = 300_000_000;
+/// A `hold` writes Goal Position := the present position read at most this long ago (ns); an
+/// older reading (the executor did not get the CPU, or its reads were lost) is read again
+/// first: holding where the servo was some time ago would move it back there.
+pub const HOLD_FRESH_NS: u64 = 20_000_000;
 
 /// One register a lifecycle step waits for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -59,6 +63,8 @@ enum Step {
     Reboot,
     /// A safe action, waiting for its read-back.
     Safe,
+    /// A hold whose last present position is too old: reading it before the hold is written.
+    SafeAlign,
 }
 
 impl LifeStep for Step {
@@ -166,6 +172,8 @@ pub struct RegDevice<T: ControlTable> {
     pending: Vec<Option<i64>>,
     /// Last good raw value read per channel.
     last: Vec<Option<i64>>,
+    /// When it was read (the request's time, ns).
+    last_ns: Vec<u64>,
     /// Tick whose replies carry a device error (alert / failed instruction).
     fault_tick: Option<u64>,
     range_rejects: u64,
@@ -206,6 +214,7 @@ impl<T: ControlTable> RegDevice<T> {
             layout: Layout::default(),
             pending: vec![None; n],
             last: vec![None; n],
+            last_ns: vec![0; n],
             fault_tick: None,
             range_rejects: 0,
             device_errors: 0,
@@ -396,8 +405,9 @@ impl<T: ControlTable> RegDevice<T> {
                 self.push_read(T::TORQUE, 1, ctx, out);
             }
             // A safe action's requests went out when it was asked for (see `safe`); a retry
-            // sends its writes and read-backs again.
-            Step::Safe => {
+            // sends its writes and read-backs again (a hold's own read first, see
+            // `HOLD_FRESH_NS`, then the hold).
+            Step::Safe | Step::SafeAlign => {
                 for k in 0..self.life.n_expect {
                     let e = self.life.expect[k];
                     if let Some(v) = e.want {
@@ -450,8 +460,9 @@ impl<T: ControlTable> RegDevice<T> {
                 l.go(Step::Probe);
                 l.base.next_try_ns = now_ns + BOOT_NS;
             }
-            // The action stays unconfirmed: the executor reports it.
-            Step::Safe | Step::None => l.base.step = Step::None,
+            // The action stays unconfirmed: the executor reports it (a hold whose position
+            // could not be read writes nothing: the servo keeps the goal it had).
+            Step::Safe | Step::SafeAlign | Step::None => l.base.step = Step::None,
         }
     }
 
@@ -567,7 +578,24 @@ impl<T: ControlTable> RegDevice<T> {
                 l.base.switched_on();
                 if let Some((i, _)) = self.hold {
                     self.last[i] = self.life.present;
+                    self.last_ns[i] = now_ns;
                 }
+            }
+            Step::SafeAlign => {
+                let Some((i, goal)) = self.hold else { return };
+                let c = self.table[i];
+                let Some(bits) = c.read.and_then(|a| self.life.got(a)) else {
+                    return;
+                };
+                let raw = c.decode_raw(bits);
+                self.last[i] = Some(raw);
+                self.last_ns[i] = now_ns;
+                let value = c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1));
+                // The hold itself, sent at the next flush (`drive`), confirmed as any.
+                self.life.go(Step::Safe);
+                self.life.base.next_try_ns = 0;
+                self.life.expect(goal, c.len, Some(value));
+                self.life.expect(T::TORQUE, 1, None);
             }
             Step::Safe => {
                 if self
@@ -835,6 +863,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
                         self.set_fault(raw as u32 & 0xFF, reply.t_sample_ns);
                     }
                     self.last[i] = Some(raw);
+                    self.last_ns[i] = reply.t_sample_ns;
                     self.family.on_raw(&mut self.table, i, raw);
                     Some(c.to_units(raw))
                 }
@@ -858,6 +887,20 @@ impl<T: ControlTable> Device for RegDevice<T> {
                 Some((i, goal))
                     if self.last[i].is_some() && self.life.base.status.phase != Phase::Disabled =>
                 {
+                    let read = self.table[i].read.map(|a| (a, self.table[i].len));
+                    let old = ctx.now_ns.saturating_sub(self.last_ns[i]) > HOLD_FRESH_NS;
+                    if let (true, true, Some((addr, len))) = (managed, old, read) {
+                        // Where it was is not where it is: read it, then hold there.
+                        self.life.go(Step::SafeAlign);
+                        self.life.base.mark_sent(ctx.tick, ctx.now_ns);
+                        self.life.expect(addr, len, None);
+                        self.push_read(addr, len, ctx, out);
+                        if self.life.base.status.tripped {
+                            self.life.base.goal = Goal::Hold;
+                        }
+                        self.life.base.status.phase = Phase::Holding;
+                        return;
+                    }
                     let raw = self.last[i].unwrap_or(0);
                     let c = self.table[i];
                     let value = c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1));
