@@ -19,12 +19,16 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use conductor_bus::{
-    monotonic_ns, status, Bus, Domain, ExecutorStats, StateSample, StateSubscriber, StatsSubscriber,
+    histogram, monotonic_ns, status, Bus, CommandFrame, Domain, ExecutorStats, RtIpc, StateSample,
+    StateSubscriber, StatsSubscriber,
 };
 use conductor_devices::protocol::mit_limits;
 use conductor_protocols::mit_can::{decode_command, MotorCommand};
 use embedded_can::Frame;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
 
+use super::episode::{Episode, Verdict, KEPT};
 use super::rig::{DeviceTruth, Robot, Sim, PULSE};
 
 /// How long the truth history reaches back.
@@ -38,6 +42,8 @@ const HOLD_PULSES: f64 = 3.0;
 const HOLD_SPAN_NS: u64 = 200_000_000;
 /// The longest gap between two polls of the simulator a published value is judged across.
 const GAP_NS: u64 = 5_000_000;
+/// The Dynamixel X Goal Position register.
+const GOAL_POSITION: u16 = 116;
 /// Examples of each kind of failure kept for the report.
 const EXAMPLES: usize = 5;
 
@@ -141,12 +147,18 @@ pub struct Watched {
     pub fresh_ns: Vec<u64>,
     /// Per joint: the newest status flags.
     pub flags: Vec<u32>,
-    /// The controller died or stalled at this time: look for the safe state.
-    pub armed_ns: Option<u64>,
-    /// When the safe state was seen (with `armed_ns` set).
-    pub safe_ns: Option<u64>,
-    /// From this time on the safe state must hold (until disarmed).
-    pub hold_from_ns: Option<u64>,
+    /// The newest command frame's send time seen on the robot's command service.
+    pub last_command_ns: Option<u64>,
+    /// The controller death under way: followed joint by joint until the campaign closes it.
+    pub episode: Option<Episode>,
+    /// Deaths judged, by verdict: in time, resent, late, unsafe, never safe.
+    pub verdicts: [u64; 5],
+    /// The latest safe state of a death, from its last command (ms).
+    pub safe_worst_ms: f64,
+    /// Late, unsafe and never-safe deaths, whole (at most [`KEPT`]).
+    pub bad_episodes: Vec<Episode>,
+    /// The running executor's latest lateness histogram: (its ticks, counts).
+    pub hist: Option<(u64, Box<[u64; histogram::BUCKETS]>)>,
     /// Unplugs: samples with a sample time inside a window must be `STALE` (from one tick
     /// and a timeout after the unplug to the replug; `u64::MAX` while unplugged).
     pub unplugged: Vec<(u64, u64)>,
@@ -179,6 +191,31 @@ impl Watched {
         }
     }
 
+    /// Ends the episode under way: judged, counted, kept when it went wrong.
+    pub fn close_episode(&mut self) -> Option<Episode> {
+        let mut e = self.episode.take()?;
+        e.close(self.hist.as_ref().map(|(t, h)| (*t, &**h)));
+        let k = match e.verdict {
+            Verdict::InTime => 0,
+            Verdict::Resent => 1,
+            Verdict::Late => 2,
+            Verdict::Unsafe => 3,
+            Verdict::Never => 4,
+        };
+        self.verdicts[k] += 1;
+        if let Some(w) = e.worst_ms {
+            self.safe_worst_ms = self.safe_worst_ms.max(w);
+        }
+        if k >= 2 {
+            self.unsafe_events += (k >= 3) as u64;
+            eprint!("soak: {}", e.describe());
+            if self.bad_episodes.len() < KEPT {
+                self.bad_episodes.push(e.clone());
+            }
+        }
+        Some(e)
+    }
+
     /// Counters summed over every incarnation so far.
     pub fn counted(&self) -> Counted {
         match &self.counted_now {
@@ -191,6 +228,43 @@ impl Watched {
 /// Locks ignoring poison (a panicking check must not hide the report).
 pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A subscriber of a robot's command service: the frames its controller sends, as the
+/// executor gets them (every frame restarts the executor's watchdog).
+struct Commands {
+    _service:
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, CommandFrame, ()>,
+    port: Subscriber<RtIpc, CommandFrame, ()>,
+}
+
+impl Commands {
+    /// Opens it, if its executor has made it.
+    fn open(node: &Node<RtIpc>, subsystem: &str) -> Option<Self> {
+        let name: ServiceName = conductor_bus::naming::commands(subsystem)
+            .as_str()
+            .try_into()
+            .ok()?;
+        let service = node
+            .service_builder(&name)
+            .publish_subscribe::<CommandFrame>()
+            .open()
+            .ok()?;
+        let port = service.subscriber_builder().create().ok()?;
+        Some(Self {
+            _service: service,
+            port,
+        })
+    }
+
+    /// The newest send time among the frames received since the last call.
+    fn newest(&mut self) -> Option<u64> {
+        let mut t = None;
+        while let Ok(Some(f)) = self.port.receive() {
+            t = t.max(Some(f.t_send_ns));
+        }
+        t
+    }
 }
 
 /// One robot as the monitor thread sees it.
@@ -212,8 +286,20 @@ struct Eye {
     /// first stats).
     incarnation: Option<(u64, u64, u64)>,
     last_seq: u64,
-    /// Goals when the hold began (Dynamixel).
-    held_goals: Option<Vec<f64>>,
+    /// The robot's command service, watched for its source's last frame.
+    cmds: Option<Commands>,
+    /// Goal Position writes the servos received since the last poll: (joint, time, rad).
+    goal_writes: Vec<(usize, u64, f64)>,
+    /// Per joint: a hold's write was received (time, value) in the episode under way.
+    hold_write: Vec<Option<(u64, f64)>>,
+    /// Damaged packets towards the devices at the last poll.
+    down_before: u64,
+    /// The previous poll's time.
+    prev_poll_ns: u64,
+    /// Per joint, in its safe condition since then: Dynamixel torque on with Goal Position where
+    /// the servo stands (since the write that put it there, or the poll that first saw it);
+    /// MIT out of motor mode (since the poll that first saw it).
+    hold_since: Vec<Option<u64>>,
     truth: Vec<DeviceTruth>,
     /// How long after a sample's publication the history must reach before it is checked.
     after_ns: u64,
@@ -239,6 +325,13 @@ fn run(
     stop: Arc<AtomicBool>,
 ) -> Result<(), conductor_bus::BusError> {
     let bus = Bus::open(&domain, "soak-monitor")?;
+    let node = NodeBuilder::new()
+        .config(domain.iceoryx2_config())
+        .create::<RtIpc>()
+        .map_err(|e| conductor_bus::BusError::Iceoryx {
+            context: "soak monitor node".into(),
+            detail: format!("{e:?}"),
+        })?;
     let mut eyes = Vec::new();
     for (robot, shared) in robots {
         {
@@ -263,7 +356,12 @@ fn run(
             pending_stats: VecDeque::new(),
             incarnation: None,
             last_seq: 0,
-            held_goals: None,
+            cmds: None,
+            goal_writes: Vec::new(),
+            hold_write: Vec::new(),
+            down_before: 0,
+            prev_poll_ns: 0,
+            hold_since: Vec::new(),
             truth: Vec::new(),
             after_ns,
         });
@@ -276,6 +374,9 @@ fn run(
         for e in eyes.iter_mut() {
             if e.stats.is_none() && now >= next_connect {
                 e.connect(&bus);
+            }
+            if e.cmds.is_none() && now >= next_connect {
+                e.cmds = Commands::open(&node, &e.robot.subsystem);
             }
             e.poll()?;
         }
@@ -369,7 +470,14 @@ impl Eye {
             .transpose()?
             .flatten()
         {
+            lock(&self.shared).hist = Some((s.ticks, Box::new(s.histogram)));
             self.pending_stats.push_back(s);
+        }
+        if let Some(c) = self.cmds.as_mut() {
+            if let Some(t) = c.newest() {
+                let mut w = lock(&self.shared);
+                w.last_command_ns = w.last_command_ns.max(Some(t));
+            }
         }
         while let Some(s) = self.pending_stats.front() {
             if s.t_ns + self.count_slack_ns > now {
@@ -379,6 +487,7 @@ impl Eye {
             self.pending_stats.pop_front();
             self.count(&s);
         }
+        self.prev_poll_ns = now;
         Ok(())
     }
 
@@ -394,6 +503,18 @@ impl Eye {
     fn check_sample(&mut self, i: usize, s: &StateSample) {
         let mut w = lock(&self.shared);
         w.flags[i] = s.status;
+        if s.status & status::WATCHDOG != 0 {
+            if let Some(e) = w.episode.as_mut() {
+                let t = e.ms(s.t_publish_ns);
+                let j = &mut e.joints[i];
+                // A trip of before (the controller died while the enable it asked for was
+                // still under way) is not this death's: its watchdog fires a timeout on.
+                let own = t >= self.robot.watchdog_ns as f64 / 2e6;
+                if j.flagged_ms.is_none() && own {
+                    j.flagged_ms = Some(t);
+                }
+            }
+        }
         if s.status & status::STALE != 0 {
             w.samples_stale += 1;
             return;
@@ -490,7 +611,20 @@ impl Eye {
             Sim::Dxl(r) => {
                 // Goal Position as the servos hold it, every millisecond (the bus writes it at
                 // most every 4 ms); the instruction log is drained so it does not grow.
-                r.sim().take_log();
+                let log = r.sim().take_log();
+                // The simulator's clock is its own: ns since it started.
+                let offset = monotonic_ns().saturating_sub(self.robot.sim_now_ns());
+                self.goal_writes.clear();
+                for (t, id, _inst, addr, data) in log {
+                    let Some(i) = (id as usize).checked_sub(1).filter(|&i| i < joints.len()) else {
+                        continue;
+                    };
+                    if addr == GOAL_POSITION && data.len() == 4 {
+                        let raw = i32::from_le_bytes([data[0], data[1], data[2], data[3]]);
+                        self.goal_writes
+                            .push((i, t + offset, (raw - 2048) as f64 * PULSE));
+                    }
+                }
                 let mut w = lock(&self.shared);
                 for (j, t) in joints.iter().zip(&self.truth) {
                     w.writes_checked += 1;
@@ -558,77 +692,117 @@ impl Eye {
         }
     }
 
-    /// The safe state after a controller's death: reached, then kept.
+    /// The safe state after a controller's death, joint by joint: reached (at the simulator),
+    /// then kept until the campaign closes the episode.
+    ///
+    /// * Dynamixel `hold`: the joint's samples say `WATCHDOG`, its torque is on, and the
+    ///   servo received the hold's Goal Position write, at a position it had around then
+    ///   (within [`HOLD_PULSES`]); timed by the simulator's stamp of that write. Kept: torque
+    ///   stays on, every later goal written is where the servo is, `WATCHDOG` stays.
+    /// * MIT `torque_off`: `WATCHDOG`, and the motor out of motor mode (seen by polling).
+    ///   Kept: it stays out.
     fn check_safe(&mut self, now: u64) {
+        let n = self.robot.joints.len();
         let mut w = lock(&self.shared);
-        let Some(armed) = w.armed_ns else {
-            self.held_goals = None;
-            return;
-        };
-        // The watchdog's doing (every joint says WATCHDOG), not a step of an enable the
-        // controller asked for before it died (which passes through a torque-off poll).
-        let tripped = w.flags.iter().all(|f| f & status::WATCHDOG != 0);
-        let safe = match self.robot.sim {
-            // Out of motor mode: the motors produce no torque.
-            Sim::Slcan(_) => tripped && self.truth.iter().all(|t| !t.driving),
-            // Hold: every joint says WATCHDOG, and every servo still has its torque on.
-            // Hold: torque on, Goal Position where the servo stands (written by the hold).
-            Sim::Dxl(_) => tripped && self.truth.iter().all(|t| t.driving),
-        };
-        let Some(from) = w.hold_from_ns else {
-            // Until the campaign starts watching it stay: the latest entry into the safe state
-            // (a trip of before, left by an enable still under way, does not count).
-            if !safe {
-                w.safe_ns = None;
-            } else if w.safe_ns.is_none() && now >= armed {
-                w.safe_ns = Some(now);
-                if matches!(self.robot.sim, Sim::Dxl(_)) {
-                    self.held_goals = Some(self.truth.iter().map(|t| t.goal).collect());
-                }
-            }
-            return;
-        };
-        if now < from {
-            return;
-        }
-        let mut why = None;
-        if !safe {
-            why = Some("left its safe state".to_string());
-        } else if let Some(g) = self.held_goals.clone() {
-            // A hold writes Goal Position := where the servo was last read; any goal written
-            // while held must be a position the servo had within HOLD_SPAN_NS.
-            for (i, (held, t)) in g.iter().zip(&self.truth).enumerate() {
-                if (held - t.goal).abs() <= 0.5 * PULSE {
-                    continue;
-                }
-                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                for (_, truth) in self.around(now.saturating_sub(HOLD_SPAN_NS), now) {
-                    lo = lo.min(truth[i].position);
-                    hi = hi.max(truth[i].position);
-                }
-                let tol = HOLD_PULSES * PULSE;
-                if t.goal < lo - tol || t.goal > hi + tol {
-                    why = Some(format!(
-                        "{}: Goal Position moved from {held:.4} to {:.4} while held, where the servo was not (it was in [{lo:.4}, {hi:.4}])",
-                        self.robot.joints[i].name, t.goal
-                    ));
-                }
-            }
-            if let Some(h) = self.held_goals.as_mut() {
-                for (held, t) in h.iter_mut().zip(&self.truth) {
-                    *held = t.goal;
-                }
+        self.hold_since.resize(n, None);
+        for i in 0..n {
+            let t = self.truth[i];
+            let holding = match self.robot.sim {
+                Sim::Dxl(_) => t.driving && (t.goal - t.position).abs() <= HOLD_PULSES * PULSE,
+                Sim::Slcan(_) => !t.driving,
+            };
+            if !holding {
+                self.hold_since[i] = None;
+            } else if self.hold_since[i].is_none() {
+                // Since the write that made it so, else since the poll before this one (the
+                // last that saw it otherwise): the earliest it can have changed.
+                let write = self.goal_writes.iter().rev().find(|x| x.0 == i);
+                let since = write.map_or(self.prev_poll_ns, |x| x.1).min(now);
+                self.hold_since[i] = Some(since);
             }
         }
-        if let Some(why) = why {
-            w.unsafe_events += 1;
-            w.example(format!(
-                "{}: {why} {} ms after its controller died",
-                self.robot.subsystem,
-                (now - armed) / 1_000_000
-            ));
-            // One event per episode.
-            w.hold_from_ns = None;
+        if w.episode.is_none() {
+            self.hold_write = vec![None; n];
+            return;
+        }
+        let dxl = matches!(self.robot.sim, Sim::Dxl(_));
+        let down = w.injected_down;
+        let e = w.episode.as_mut().expect("checked above");
+        e.tick_ms = self.robot.tick_ns as f64 / 1e6;
+        if !e.all_safe() && now + self.robot.tick_ns >= e.origin_ns + self.robot.watchdog_ns {
+            e.damaged_towards_devices += down.saturating_sub(self.down_before);
+        }
+        self.down_before = down;
+        // Writes from the controller's last frames reach the servos within a few ticks of
+        // it; from half the watchdog on, a goal written is the executor's own: the hold.
+        let hold_from = e.origin_ns + self.robot.watchdog_ns / 2;
+        for &(i, t, goal) in &self.goal_writes {
+            if t < hold_from {
+                continue;
+            }
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for (_, truth) in self.around(t.saturating_sub(HOLD_SPAN_NS), t) {
+                lo = lo.min(truth[i].position);
+                hi = hi.max(truth[i].position);
+            }
+            let tol = HOLD_PULSES * PULSE;
+            let there = goal >= lo - tol && goal <= hi + tol;
+            let present = self.truth[i].position;
+            let j = &mut e.joints[i];
+            if self.hold_write[i].is_none() {
+                self.hold_write[i] = Some((t, goal));
+                if !there {
+                    j.bad_hold = Some((goal, present));
+                }
+            } else if j.safe_ms.is_some() && !there && j.left_ms.is_none() {
+                j.left_ms = Some((t as f64 - e.origin_ns as f64) / 1e6);
+                j.left_to = Some(format!(
+                    "Goal Position {goal:.4} written while the servo was in [{lo:.4}, {hi:.4}]"
+                ));
+            }
+        }
+        let flags = w.flags.clone();
+        let Some(e) = w.episode.as_mut() else {
+            return;
+        };
+        for i in 0..n {
+            let t = self.truth[i];
+            let flagged = flags[i] & status::WATCHDOG != 0;
+            let j = &mut e.joints[i];
+            if j.safe_ms.is_none() {
+                // In its safe condition since `hold_since` (a hold write that was lost changes
+                // nothing when the goal is there already: its read-back confirms it), and
+                // tripped since the flag's publication.
+                let reached = match (self.hold_since[i], j.flagged_ms) {
+                    (Some(h), Some(f)) if flagged => {
+                        Some(h.max(e.origin_ns + (f * 1e6).max(0.0) as u64))
+                    }
+                    _ => None,
+                };
+                j.torque = t.driving;
+                j.goal = t.goal;
+                j.present = t.position;
+                if let Some(at) = reached {
+                    j.safe_ms = Some((at as f64 - e.origin_ns as f64) / 1e6);
+                }
+                continue;
+            }
+            if j.left_ms.is_some() {
+                continue;
+            }
+            let left = if dxl && !t.driving {
+                Some("torque off".to_string())
+            } else if !dxl && t.driving {
+                Some("back in motor mode".to_string())
+            } else if !flagged {
+                Some(format!("its samples lost WATCHDOG (flags {:#x})", flags[i]))
+            } else {
+                None
+            };
+            if let Some(why) = left {
+                j.left_ms = Some((now as f64 - e.origin_ns as f64) / 1e6);
+                j.left_to = Some(why);
+            }
         }
     }
 

@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use serde::Serialize;
 
+use super::episode::Episode;
 use super::monitor::{Counted, Watched};
 use super::rig::{Kind, Robot};
 use super::Options;
@@ -71,9 +72,7 @@ pub struct KindTally {
 pub struct Tally {
     kinds: BTreeMap<Fault, KindTally>,
     safe_episodes: u64,
-    safe_late: u64,
-    safe_worst_ns: u64,
-    safe_limit_ns: u64,
+    safe_limit_ms: f64,
     deaths_uncounted: u64,
 }
 
@@ -83,9 +82,7 @@ impl Tally {
         Self {
             kinds: BTreeMap::new(),
             safe_episodes: 0,
-            safe_late: 0,
-            safe_worst_ns: 0,
-            safe_limit_ns: 0,
+            safe_limit_ms: 0.0,
             deaths_uncounted: 0,
         }
     }
@@ -110,12 +107,10 @@ impl Tally {
         k.mean_recovery_ms = k.sum_ns as f64 / 1e6 / k.recovered as f64;
     }
 
-    /// A safe state reached `ns` after the controller died (`nominal`: watchdog + 1 tick).
-    pub fn safe(&mut self, ns: u64, nominal: u64, in_time: bool) {
+    /// A controller death judged (the monitor keeps the verdicts and the bad ones).
+    pub fn safe(&mut self, e: &Episode) {
         self.safe_episodes += 1;
-        self.safe_late += !in_time as u64;
-        self.safe_worst_ns = self.safe_worst_ns.max(ns);
-        self.safe_limit_ns = nominal;
+        self.safe_limit_ms = e.limit_ms;
     }
 
     /// The robot's report.
@@ -152,9 +147,15 @@ impl Tally {
             deaths_uncounted: self.deaths_uncounted,
             safe_state: SafeReport {
                 episodes: self.safe_episodes,
-                late: self.safe_late,
-                worst_ms: self.safe_worst_ns as f64 / 1e6,
-                watchdog_plus_tick_ms: self.safe_limit_ns as f64 / 1e6,
+                in_time: w.verdicts[0],
+                resent: w.verdicts[1],
+                late: w.verdicts[2],
+                unsafe_stops: w.verdicts[3],
+                never: w.verdicts[4],
+                worst_ms: w.safe_worst_ms,
+                watchdog_plus_tick_ms: (robot.watchdog_ns + robot.tick_ns) as f64 / 1e6,
+                limit_ms: self.safe_limit_ms,
+                bad: w.bad_episodes.clone(),
             },
             samples_checked: w.samples_checked,
             samples_stale: w.samples_stale,
@@ -177,17 +178,30 @@ impl Tally {
     }
 }
 
-/// The safe state after controller deaths.
+/// The safe state after controller deaths, each timed from its controller's last command.
 #[derive(Debug, Clone, Serialize)]
 pub struct SafeReport {
-    /// Controller deaths and stalls.
+    /// Controller deaths and stalls judged.
     pub episodes: u64,
-    /// Safe states later than allowed.
+    /// Every joint safe within the limit, and kept.
+    pub in_time: u64,
+    /// Safe and kept, later than the limit only by resending safe packets the wire damaged
+    /// (see `episode::Verdict::Resent`).
+    pub resent: u64,
+    /// Safe and kept, but later than the limit.
     pub late: u64,
-    /// Worst time from the death to the safe state (ms).
+    /// A joint left its safe state, or held where the device was not.
+    pub unsafe_stops: u64,
+    /// A joint never reached it.
+    pub never: u64,
+    /// Worst time from the last command to the last joint's safe state (ms).
     pub worst_ms: f64,
     /// The watchdog plus one tick (ms).
     pub watchdog_plus_tick_ms: f64,
+    /// The limit checked: watchdog + 1 tick + the allowances of `soak::episode` (ms).
+    pub limit_ms: f64,
+    /// Every late, unsafe or never-safe death, whole (at most `episode::KEPT`).
+    pub bad: Vec<Episode>,
 }
 
 /// One robot's result.
@@ -409,11 +423,14 @@ impl Report {
             );
             check(
                 format!("{s}: safe state in time after every controller death, kept"),
-                r.unsafe_events == 0 && r.safe_state.late == 0 && r.safe_state.episodes == r.controller_deaths,
+                r.unsafe_events == 0
+                    && r.safe_state.in_time + r.safe_state.resent == r.controller_deaths
+                    && r.safe_state.episodes == r.controller_deaths,
                 format!(
-                    "{} deaths, {} safe, {} late, {} unsafe; worst {:.1} ms (watchdog + 1 tick {:.1} ms)",
-                    r.controller_deaths, r.safe_state.episodes, r.safe_state.late, r.unsafe_events,
-                    r.safe_state.worst_ms, r.safe_state.watchdog_plus_tick_ms
+                    "{} deaths, {} safe in time, {} in time but for resent damaged packets, {} late, {} unsafe, {} never safe; worst {:.1} ms from the last command (limit {:.1} ms: watchdog + 1 tick {:.1} ms + allowances)",
+                    r.controller_deaths, r.safe_state.in_time, r.safe_state.resent, r.safe_state.late, r.safe_state.unsafe_stops,
+                    r.safe_state.never, r.safe_state.worst_ms, r.safe_state.limit_ms,
+                    r.safe_state.watchdog_plus_tick_ms
                 ),
             );
             check(
@@ -563,14 +580,21 @@ impl Report {
             }
             let _ = writeln!(
                 t,
-                "{:<11} safe state after {} controller deaths: {} late, {} unsafe, worst {:.1} ms (watchdog + 1 tick = {:.1} ms)",
+                "{:<11} safe state after {} controller deaths: {} in time, {} after resending damaged packets, {} late, {} unsafe, {} never; worst {:.1} ms from the last command (watchdog + 1 tick = {:.1} ms, limit {:.1} ms)",
                 r.subsystem,
                 r.controller_deaths,
+                r.safe_state.in_time,
+                r.safe_state.resent,
                 r.safe_state.late,
-                r.unsafe_events,
+                r.safe_state.unsafe_stops,
+                r.safe_state.never,
                 r.safe_state.worst_ms,
-                r.safe_state.watchdog_plus_tick_ms
+                r.safe_state.watchdog_plus_tick_ms,
+                r.safe_state.limit_ms
             );
+            for e in &r.safe_state.bad {
+                t += &e.describe();
+            }
             let _ = writeln!(
                 t,
                 "{:<11} wrong values published: {} of {} checked ({} stale, {} dated late by a starved simulator, worst {:.1} ms); written to devices: {} of {} checked",

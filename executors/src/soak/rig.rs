@@ -123,6 +123,8 @@ impl Robot {
             wire(seed),
             wire(seed ^ 0x5EED),
         );
+        // Every instruction the servos take, with its time: the monitor times the holds by it.
+        sim.sim().start_log();
         Ok(Self {
             kind: Kind::Dynamixel,
             subsystem: "right_leg".into(),
