@@ -112,6 +112,10 @@ pub struct Episode {
     pub damaged_towards_devices: u64,
     /// The tick (ms).
     pub tick_ms: f64,
+    /// The executors ran with real-time priority: the limit is strict. Without it (`--no-rt`)
+    /// the executor's worst tick lateness in the episode is added to the limit: then the
+    /// machine's load, not the executor, decides how late a tick runs.
+    pub executors_rt: bool,
     /// The verdict.
     pub verdict: Verdict,
     #[serde(skip)]
@@ -156,6 +160,7 @@ impl Episode {
             executor_restarted: false,
             damaged_towards_devices: 0,
             tick_ms: 0.0,
+            executors_rt: true,
             verdict: Verdict::Never,
             origin_ns,
             hist0: None,
@@ -195,7 +200,14 @@ impl Episode {
             Verdict::Unsafe
         } else if !self.all_safe() {
             Verdict::Never
-        } else if self.worst_ms.is_some_and(|w| w > self.limit_ms) {
+        } else if self.worst_ms.is_some_and(|w| {
+            let lateness = if self.executors_rt {
+                0.0
+            } else {
+                self.tick_lateness_ms.unwrap_or(0.0)
+            };
+            w > self.limit_ms + lateness
+        }) {
             let resend =
                 self.damaged_towards_devices as f64 * (SAFE_RETRY_NS as f64 / 1e6 + self.tick_ms);
             let flagged_in_time = self

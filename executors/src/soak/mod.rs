@@ -514,6 +514,7 @@ impl Campaign<'_> {
                 &names,
             );
             e.hist0 = w.hist.clone();
+            e.executors_rt = self.o.rt;
             w.episode = Some(e);
         }
         // Safe, and still safe when the watchdog must have fired.
