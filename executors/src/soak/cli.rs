@@ -46,7 +46,8 @@ struct RunArgs {
     /// The workspace root holding deploy/ (default: found from here or from this program).
     #[arg(long)]
     root: Option<PathBuf>,
-    /// The executor program (default: conductor-executor next to this program).
+    /// The executor program (default: conductor-executor next to this program; for
+    /// `conductor soak`, the conductor binary itself).
     #[arg(long)]
     executor: Option<PathBuf>,
     /// The faults injected one at a time, comma-separated: unplug, executor-kill,

@@ -171,6 +171,18 @@ about 5 minutes; --quick about one. Run it on a quiet machine.
 Examples:\n  conductor bench\n  conductor bench --quick -o /tmp/bench\n  conductor bench --rates 1000,2000,5000 --states 3 --seconds 5"
     )]
     Bench(BenchArgs),
+    /// Fault campaign on the simulated robots of deploy/ (byte faults, unplugs, executor and
+    /// controller kills, stalls, floods), checked from outside; one table, JSON, exit 1 when a
+    /// check failed. `conductor soak --help` for its options.
+    #[command(
+        disable_help_flag = true,
+        after_help = "Examples:\n  conductor soak --duration 10m --json soak.json\n  conductor soak --duration 5m --faults controller-kill,controller-stop"
+    )]
+    Soak {
+        /// The campaign's own arguments (see `conductor soak --help`).
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<std::ffi::OsString>,
+    },
     /// The stress test's helper processes (logger, probe; see `conductor-stress --help`).
     #[command(name = "__stress", hide = true, disable_help_flag = true)]
     Stress {

@@ -32,6 +32,7 @@ pub mod record;
 pub mod recording;
 pub mod replay;
 pub mod select;
+pub mod soak;
 pub mod top;
 pub mod udp;
 pub mod view;
@@ -70,6 +71,7 @@ pub fn run(cli: Cli) -> Result<()> {
         | Command::Executor { .. }
         | Command::ScoreGateway { .. }
         | Command::Stress { .. }
+        | Command::Soak { .. }
         | Command::PingPong => Err(CliError::Usage(
             "launch and the helper processes run from the conductor binary's main (they own \
              the process's signals)"

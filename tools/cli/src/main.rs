@@ -14,6 +14,7 @@ fn main() -> ExitCode {
         Command::ScoreGateway { args } => return conductor_cli::launch::score_gateway(args),
         Command::Stress { args } => return conductor_cli::bench::stress_tool(args),
         Command::PingPong => return conductor_cli::bench::pingpong_child(),
+        Command::Soak { args } => return conductor_cli::soak::run(args),
         _ => {}
     }
     match conductor_cli::run(cli) {
