@@ -765,9 +765,9 @@ impl Eye {
         let Some(e) = w.episode.as_mut() else {
             return;
         };
-        for i in 0..n {
+        for (i, &f) in flags.iter().enumerate().take(n) {
             let t = self.truth[i];
-            let flagged = flags[i] & status::WATCHDOG != 0;
+            let flagged = f & status::WATCHDOG != 0;
             let j = &mut e.joints[i];
             if j.safe_ms.is_none() {
                 // In its safe condition since `hold_since` (a hold write that was lost changes
@@ -795,7 +795,7 @@ impl Eye {
             } else if !dxl && t.driving {
                 Some("back in motor mode".to_string())
             } else if !flagged {
-                Some(format!("its samples lost WATCHDOG (flags {:#x})", flags[i]))
+                Some(format!("its samples lost WATCHDOG (flags {:#x})", f))
             } else {
                 None
             };
