@@ -477,13 +477,8 @@ impl Report {
                     r.counted.setpoints_rejected, r.counted.setpoints_clamped
                 ),
             );
-            for f in [
-                Fault::Unplug,
-                Fault::ExecutorKill,
-                Fault::ControllerKill,
-                Fault::ControllerStall,
-                Fault::Flood,
-            ] {
+            // The kinds this campaign injects (`--faults`).
+            for &f in &o.faults {
                 let k = r.faults.get(&f).cloned().unwrap_or_default();
                 check(
                     format!("{s}: {} injected and recovered from", f.name()),
