@@ -310,8 +310,9 @@ mod tests {
         e.close(None);
         assert_eq!(e.verdict, Verdict::Late);
         e.joints[0].left_ms = Some(600.0);
+        e.joints[0].left_to = Some("torque off".into());
         e.close(None);
         assert_eq!(e.verdict, Verdict::Unsafe);
-        assert!(e.describe().contains("left it at 600.0 ms"));
+        assert!(e.describe().contains("left it at 600.0 ms: torque off"));
     }
 }
