@@ -11,7 +11,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
-use conductor_executor::soak::{self, controller, rig};
+use conductor_executor::soak::{self, controller, rig, score_campaign};
 
 #[derive(Parser)]
 #[command(
@@ -70,6 +70,16 @@ enum Cmd {
         #[arg(long = "joint", value_parser = rig::Joint::from_arg)]
         joints: Vec<rig::Joint>,
     },
+    /// The Score board's controller process.
+    #[command(hide = true)]
+    ScoreController {
+        #[arg(long)]
+        domain: String,
+        #[arg(long)]
+        rate_hz: f64,
+        #[arg(long)]
+        seed: u64,
+    },
 }
 
 fn duration(s: &str) -> Result<Duration, String> {
@@ -94,7 +104,30 @@ fn duration(s: &str) -> Result<Duration, String> {
 }
 
 fn main() -> ExitCode {
+    // The launcher runs the board's gateway as `conductor-soak score-gateway <its arguments>`.
+    if std::env::args().nth(1).as_deref() == Some("score-gateway") {
+        return score_gateway::main_with_args(std::env::args().skip(1));
+    }
     let cli = Cli::parse();
+    if let Some(Cmd::ScoreController {
+        domain,
+        rate_hz,
+        seed,
+    }) = cli.cmd
+    {
+        let args = score_campaign::ControllerArgs {
+            domain,
+            rate_hz,
+            seed,
+        };
+        return match score_campaign::run_controller(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("soak score controller: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
     if let Some(Cmd::Controller {
         domain,
         subsystem,
@@ -136,7 +169,11 @@ fn main() -> ExitCode {
         executor: r
             .executor
             .unwrap_or_else(conductor_executor::launcher::default_executor),
-        controller: vec![me, "controller".into()],
+        controller: vec![me.clone(), "controller".into()],
+        board: Some(soak::BoardPrograms {
+            controller: vec![me.clone(), "score-controller".into()],
+            gateway: vec![me, "score-gateway".into()],
+        }),
     };
     let report = match soak::run(&opts) {
         Ok(r) => r,
