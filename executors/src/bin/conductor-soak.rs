@@ -42,6 +42,17 @@ struct RunArgs {
     /// Command frames per second of each controller.
     #[arg(long, default_value_t = 1000.0)]
     rate_hz: f64,
+    /// Probability that a byte on the Score board's USB link is corrupted (USB's own CRC makes
+    /// this rare on a real link; at the legs' 0.5 % the gateway's configuration handling fails,
+    /// see RELIABILITY.md).
+    #[arg(long, default_value_t = 0.0001)]
+    board_corrupt: f64,
+    /// Probability that a byte on the Score board's USB link is lost.
+    #[arg(long, default_value_t = 0.0001)]
+    board_drop: f64,
+    /// Leave the Score board out (the two legs only).
+    #[arg(long)]
+    no_board: bool,
     /// Write the report as JSON here.
     #[arg(long)]
     json: Option<PathBuf>,
@@ -170,9 +181,11 @@ fn main() -> ExitCode {
             .executor
             .unwrap_or_else(conductor_executor::launcher::default_executor),
         controller: vec![me.clone(), "controller".into()],
-        board: Some(soak::BoardPrograms {
+        board: (!r.no_board).then(|| soak::BoardOptions {
             controller: vec![me.clone(), "score-controller".into()],
             gateway: vec![me, "score-gateway".into()],
+            corrupt: r.board_corrupt,
+            drop: r.board_drop,
         }),
     };
     let report = match soak::run(&opts) {

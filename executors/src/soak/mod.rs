@@ -64,18 +64,21 @@ pub struct Options {
     /// The program (and its arguments) that runs a controller: it gets the controller's own
     /// arguments after these.
     pub controller: Vec<String>,
-    /// The Score board: the program (and arguments) that runs the board's controller, and the
-    /// one the launcher runs as `score-gateway`. `None`: the legs only.
-    pub board: Option<BoardPrograms>,
+    /// The Score board: its programs and its link's byte faults. `None`: the legs only.
+    pub board: Option<BoardOptions>,
 }
 
-/// The programs of the Score board's part (see [`score_campaign`]).
+/// The Score board's part (see [`score_campaign`]).
 #[derive(Debug, Clone)]
-pub struct BoardPrograms {
+pub struct BoardOptions {
     /// Its controller, before the controller's own arguments.
     pub controller: Vec<String>,
     /// The gateway (`score-gateway`, or a program running its main), before its arguments.
     pub gateway: Vec<String>,
+    /// Probability that a byte on the board's USB link is corrupted.
+    pub corrupt: f64,
+    /// Probability that a byte on the board's USB link is lost.
+    pub drop: f64,
 }
 
 /// How often an unconfirmed safe action is sent again (devices' lifecycle).
@@ -201,11 +204,11 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
     let mut text = rig::manifest(&o.root, &dxl_link, &can_link).map_err(io)?;
     // The Score board: its simulator on a pty and the gateway table of deploy/score-board.toml.
     let board = match &o.board {
-        Some(_) => {
+        Some(b) => {
             let link = score_campaign::link_path(dir);
             text.push_str(&score_rig::manifest_section(&o.root, &link).map_err(io)?);
             let sim =
-                score_rig::BoardSim::start(&link, o.corrupt, o.drop, o.seed ^ 0x5C).map_err(io)?;
+                score_rig::BoardSim::start(&link, b.corrupt, b.drop, o.seed ^ 0x5C).map_err(io)?;
             Some(Arc::new(sim))
         }
         None => None,
@@ -285,6 +288,7 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
             watchdog_ns: score_rig::watchdog_ns(&o.root).map_err(io)?,
             end: c.started + o.duration,
             started: c.started,
+            link_faults: (p.corrupt, p.drop),
         })),
         _ => None,
     };

@@ -85,6 +85,8 @@ pub struct Record {
     pub frames_out: u64,
     /// Of them, damaged on the wire.
     pub damaged_out: u64,
+    /// Of the damaged ones, answers to a request (the rest are samples and table changes).
+    pub damaged_replies: u64,
     /// Chunks of bytes from the host damaged on the wire.
     pub damaged_in: u64,
     /// Frames from the host the board rejected (bad CRC, bad COBS, too long), all power-ons.
@@ -101,6 +103,9 @@ pub struct Record {
     pub duty: [(f64, u64); 2],
     /// Per watched variable: (from ns, value) whenever its value changed.
     pub history: [VecDeque<(u64, f64)>; 4],
+    /// When a commanded output was last given a duty other than 0 (ns): the last command of a
+    /// controller that reached the board.
+    pub last_nonzero_ns: u64,
     /// Whether the board is powered (plugged).
     pub plugged: bool,
     /// The longest the serving thread overslept a wait (ns).
@@ -120,8 +125,12 @@ impl Record {
                     .push(format!("PWM{} duty {duty:.4} % (TOP {top})", OUTPUTS[out]));
             }
         }
+        let now = monotonic_ns();
+        if duty != 0.0 {
+            self.last_nonzero_ns = now;
+        }
         if self.duty[out].0 != duty {
-            self.duty[out] = (duty, monotonic_ns());
+            self.duty[out] = (duty, now);
         }
     }
 
@@ -410,7 +419,13 @@ fn no_extra(_: &str, _: &mut dyn core::fmt::Write) -> Option<bool> {
 }
 
 /// Writes `frame` to the host through the wire's faults.
-fn send(port: &mut Port, faults: &mut FaultInjector, rec: &Mutex<Record>, frame: &[u8]) {
+fn send(
+    port: &mut Port,
+    faults: &mut FaultInjector,
+    rec: &Mutex<Record>,
+    frame: &[u8],
+    reply: bool,
+) {
     let mut bytes = frame.to_vec();
     let (f, _) = faults.apply(&mut bytes);
     {
@@ -418,6 +433,7 @@ fn send(port: &mut Port, faults: &mut FaultInjector, rec: &Mutex<Record>, frame:
         r.frames_out += 1;
         if f.damaged() {
             r.damaged_out += 1;
+            r.damaged_replies += u64::from(reply);
         }
     }
     // A host that does not read (a gateway being restarted) must not stall the board: the
@@ -522,7 +538,7 @@ fn serve(
                 .feed(&bytes, &mut l.board, now, &mut out, &mut no_extra);
             for f in out.frames() {
                 if f.len() > 3 {
-                    send(p, &mut to_host, rec, f);
+                    send(p, &mut to_host, rec, f, true);
                 }
             }
             count_hellos(&out, rec);
@@ -535,7 +551,7 @@ fn serve(
         l.note_values(rec);
         if let Some(generation) = l.board.take_table_change() {
             if let Ok(n) = encode_reply(0, &Reply::TableChanged { generation }, &mut frame) {
-                send(p, &mut to_host, rec, &frame[..n]);
+                send(p, &mut to_host, rec, &frame[..n], false);
             }
         }
         let lost = l.board.sampler.lost();
@@ -550,7 +566,7 @@ fn serve(
             }
         });
         for b in batches {
-            send(p, &mut to_host, rec, &b);
+            send(p, &mut to_host, rec, &b, false);
         }
         let s = l.server.stats();
         let mut r = lock(rec);

@@ -269,14 +269,25 @@ impl Gateway {
             (vars, generation) = Self::list(link)?;
         }
         if !vars.is_empty() {
-            let (text, ok) = Self::exec(link, "save")?;
-            if ok {
-                self.script = text
-                    .lines()
-                    .map(str::trim)
-                    .filter(|l| !l.is_empty() && !l.starts_with('#'))
-                    .map(String::from)
-                    .collect();
+            // The script comes back in several `Output` frames and nothing says how many: one
+            // lost on the link would leave a script missing lines, which a restore would then
+            // replay. Kept only when two answers in a row agree.
+            let mut previous: Option<String> = None;
+            for _ in 0..4 {
+                let (text, ok) = Self::exec(link, "save")?;
+                if !ok {
+                    break;
+                }
+                if previous.as_deref() == Some(text.as_str()) {
+                    self.script = text
+                        .lines()
+                        .map(str::trim)
+                        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+                        .map(String::from)
+                        .collect();
+                    break;
+                }
+                previous = Some(text);
             }
         }
         self.update_states(&vars)?;
@@ -495,7 +506,6 @@ impl Gateway {
         if last.elapsed() < limit {
             return Ok(());
         }
-        self.last_command = None;
         self.stats.watchdog_trips += 1;
         let mut names = Vec::new();
         for i in 0..self.states.len() {
@@ -504,6 +514,8 @@ impl Gateway {
                 continue;
             };
             let (safe, _) = s.meta.clamp(0.0);
+            // A link lost here leaves the watchdog armed: it fires again on the next
+            // connection, so the board does not keep the dead controller's value.
             let ok = self.set(link, i, id, safe)?;
             let s = &mut self.states[i];
             s.commanded = false;
@@ -512,6 +524,7 @@ impl Gateway {
                 names.push(format!("{} = {safe}", s.name));
             }
         }
+        self.last_command = None;
         eprintln!(
             "score-gateway: no command for {} ms: {}",
             limit.as_millis(),
