@@ -641,6 +641,16 @@ fn gateway_pid(link: &std::path::Path) -> Option<u32> {
     None
 }
 
+/// How long process `pid` has waited on a run queue in all (ns; `/proc/<pid>/schedstat`).
+fn run_delay_ns(pid: u32) -> Option<u64> {
+    std::fs::read_to_string(format!("/proc/{pid}/schedstat"))
+        .ok()?
+        .split_whitespace()
+        .nth(1)?
+        .parse()
+        .ok()
+}
+
 struct Run {
     c: BoardCampaign,
     rng: Rng,
@@ -870,6 +880,9 @@ impl Run {
         lock(&self.seen).watchdog_flags = 0;
         let lost = |b: &score_rig::Record| b.damaged_in + b.damaged_replies;
         let lost0 = lost(&self.c.board.record());
+        self.c.board.record().window_lag_ns = 0;
+        let gw = gateway_pid(self.c.board.link());
+        let waited0 = gw.and_then(run_delay_ns);
         let t = monotonic_ns();
         kill(
             ctl.pid(),
@@ -897,12 +910,21 @@ impl Run {
             std::thread::sleep(Duration::from_millis(1));
         };
         // Each request or answer lost on the link in the meantime costs the gateway one
-        // resend (the safe `Set` may be among them), as a lost request costs the legs one retry.
+        // resend (the safe `Set` may be among them), as a lost request costs the legs one retry:
+        // `RESEND_AFTER`, seen at the end of one of its port reads (one loop).
         let lost_round_trips = lost(&self.c.board.record()) - lost0;
+        // And the time the gateway waited for a CPU meanwhile (its run-queue delay, from
+        // /proc) and the board's thread overslept: a starved process is late by that much.
+        let starved = match (waited0, gw.and_then(run_delay_ns)) {
+            (Some(a), Some(b)) => b.saturating_sub(a),
+            _ => 0,
+        } + self.c.board.record().window_lag_ns;
         let limit = self.c.watchdog_ns
             + GATEWAY_LOOP_NS
             + 2_000_000
-            + lost_round_trips * score_gateway::link::RESEND_AFTER.as_nanos() as u64;
+            + starved
+            + lost_round_trips
+                * (score_gateway::link::RESEND_AFTER.as_nanos() as u64 + GATEWAY_LOOP_NS);
         let mut result = Ok(());
         match safe_at {
             None => {
@@ -922,10 +944,11 @@ impl Run {
                     self.report.safe_in_time += 1;
                 } else {
                     result = Err(format!(
-                        "duties at 0 {:.1} ms after the last command reached the board (limit {:.1} ms: watchdog, one gateway loop, 2 ms, {} resends)",
+                        "duties at 0 {:.1} ms after the last command reached the board (limit {:.1} ms: watchdog, one gateway loop, 2 ms, {} resends, {:.1} ms starved of CPU)",
                         took as f64 / 1e6,
                         limit as f64 / 1e6,
-                        lost_round_trips
+                        lost_round_trips,
+                        starved as f64 / 1e6
                     ));
                 }
             }
@@ -943,8 +966,19 @@ impl Run {
             std::thread::sleep(Duration::from_millis(2));
         }
         self.idle(end.saturating_duration_since(Instant::now()));
-        if lock(&self.seen).watchdog_flags > 0 {
+        let tripped = lock(&self.seen).watchdog_flags > 0;
+        if tripped {
             self.report.trips_seen += 1;
+        } else {
+            let text = format!(
+                "{SUBSYSTEM}: {}: no sample flagged WATCHDOG while nobody commanded",
+                if stall {
+                    "controller SIGSTOP"
+                } else {
+                    "controller SIGKILL"
+                }
+            );
+            eprintln!("soak: {text}");
         }
         let back = Instant::now();
         if stall {
@@ -970,7 +1004,7 @@ impl Run {
                 BoardFault::ControllerKill
             })
             .or_default()
-            .counted += u64::from(lock(&self.seen).watchdog_flags > 0);
+            .counted += u64::from(tripped);
         result.map(|_| back.elapsed().as_nanos() as u64)
     }
 

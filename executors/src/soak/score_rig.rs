@@ -110,6 +110,8 @@ pub struct Record {
     pub plugged: bool,
     /// The longest the serving thread overslept a wait (ns).
     pub worst_lag_ns: u64,
+    /// The same since the campaign last set it to 0 (ns).
+    pub window_lag_ns: u64,
 }
 
 impl Record {
@@ -525,6 +527,7 @@ fn serve(
         {
             let mut r = lock(rec);
             r.worst_lag_ns = r.worst_lag_ns.max(over.as_nanos() as u64);
+            r.window_lag_ns = r.window_lag_ns.max(over.as_nanos() as u64);
         }
         if n > 0 {
             let mut bytes = buf[..n].to_vec();
