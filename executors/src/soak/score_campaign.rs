@@ -643,7 +643,16 @@ fn gateway_pid(link: &std::path::Path) -> Option<u32> {
 
 /// How long process `pid` has waited on a run queue in all (ns; `/proc/<pid>/schedstat`).
 fn run_delay_ns(pid: u32) -> Option<u64> {
-    std::fs::read_to_string(format!("/proc/{pid}/schedstat"))
+    schedstat(&format!("/proc/{pid}/schedstat"))
+}
+
+/// The same for thread `tid` of this process.
+fn thread_run_delay_ns(tid: i32) -> Option<u64> {
+    schedstat(&format!("/proc/self/task/{tid}/schedstat"))
+}
+
+fn schedstat(path: &str) -> Option<u64> {
+    std::fs::read_to_string(path)
         .ok()?
         .split_whitespace()
         .nth(1)?
@@ -882,7 +891,9 @@ impl Run {
         let lost0 = lost(&self.c.board.record());
         self.c.board.record().window_lag_ns = 0;
         let gw = gateway_pid(self.c.board.link());
+        let tid = self.c.board.record().tid;
         let waited0 = gw.and_then(run_delay_ns);
+        let board_waited0 = thread_run_delay_ns(tid);
         let t = monotonic_ns();
         kill(
             ctl.pid(),
@@ -915,10 +926,13 @@ impl Run {
         let lost_round_trips = lost(&self.c.board.record()) - lost0;
         // And the time the gateway waited for a CPU meanwhile (its run-queue delay, from
         // /proc) and the board's thread overslept: a starved process is late by that much.
-        let starved = match (waited0, gw.and_then(run_delay_ns)) {
+        let delta = |a: Option<u64>, b: Option<u64>| match (a, b) {
             (Some(a), Some(b)) => b.saturating_sub(a),
             _ => 0,
-        } + self.c.board.record().window_lag_ns;
+        };
+        let starved = delta(waited0, gw.and_then(run_delay_ns))
+            + delta(board_waited0, thread_run_delay_ns(tid))
+                .max(self.c.board.record().window_lag_ns);
         let limit = self.c.watchdog_ns
             + GATEWAY_LOOP_NS
             + 2_000_000

@@ -112,6 +112,9 @@ pub struct Record {
     pub worst_lag_ns: u64,
     /// The same since the campaign last set it to 0 (ns).
     pub window_lag_ns: u64,
+    /// The serving thread's id (its `/proc/self/task/<tid>/schedstat` tells how long it
+    /// waited for a CPU).
+    pub tid: i32,
 }
 
 impl Record {
@@ -469,6 +472,8 @@ fn serve(
             ..FaultConfig::default()
         })
     };
+    // SAFETY: gettid has no preconditions.
+    lock(rec).tid = unsafe { libc::gettid() };
     let mut to_host = wire(seed);
     let mut to_board = wire(seed ^ 0x5C0E);
     let mut port = Some(port);
