@@ -101,6 +101,9 @@ pub struct Gateway {
     clock: ClockMap,
     generation: Option<u32>,
     script: Vec<String>,
+    /// A restore was started and has not finished (its link was lost): what the board holds
+    /// is part of it, not the board's own configuration.
+    restore_unfinished: bool,
     tick: u64,
     stop: Arc<AtomicBool>,
     announced: bool,
@@ -124,6 +127,7 @@ impl Gateway {
             clock: ClockMap::new(),
             generation: None,
             script: Vec::new(),
+            restore_unfinished: false,
             tick: 0,
             stop,
             announced: false,
@@ -250,7 +254,26 @@ impl Gateway {
     /// extends the states, and subscribes every variable.
     fn sync(&mut self, link: &mut Link) -> Result<(), GatewayError> {
         let (mut vars, mut generation) = Self::list(link)?;
+        if self.restore_unfinished && !vars.is_empty() {
+            // The last restore lost its link half-way (an `Exec` is not repeated): the board
+            // holds part of the configuration. Clear it (a variable others depend on goes in
+            // a later pass) and restore from the start.
+            eprintln!(
+                "score-gateway: the last restore was interrupted; clearing its {} variables to restore again",
+                vars.len()
+            );
+            for _ in 0..4 {
+                for v in &vars {
+                    Self::exec(link, &format!("del {}", v.name))?;
+                }
+                (vars, generation) = Self::list(link)?;
+                if vars.is_empty() {
+                    break;
+                }
+            }
+        }
         if vars.is_empty() && self.opts.restore && !self.script.is_empty() {
+            self.restore_unfinished = true;
             eprintln!(
                 "score-gateway: the board's table is empty; restoring its last configuration ({} lines)",
                 self.script.len()
@@ -266,6 +289,7 @@ impl Gateway {
                 }
             }
             self.stats.restores += 1;
+            self.restore_unfinished = false;
             (vars, generation) = Self::list(link)?;
         }
         if !vars.is_empty() {
