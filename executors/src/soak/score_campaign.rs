@@ -912,7 +912,8 @@ impl Run {
             let b = self.c.board.record();
             if b.all_off() {
                 let at = b.duty.iter().map(|d| d.1).max().unwrap_or(0).max(t);
-                break Some((at, b.last_nonzero_ns.max(t)));
+                let first = b.duty.iter().map(|d| d.1).min().unwrap_or(0).max(t);
+                break Some((at, b.last_nonzero_ns.max(t), first));
             }
             drop(b);
             if Instant::now() > wait_until {
@@ -945,7 +946,7 @@ impl Run {
                 self.report.unsafe_events += 1;
                 result = Err("the duties never reached 0".to_string());
             }
-            Some((s, last)) => {
+            Some((s, last, first)) => {
                 // The watchdog counts from the last command: the one that reached the board
                 // (a gateway behind on a flood of commands applies them after the death).
                 let took = s - last;
@@ -958,8 +959,9 @@ impl Run {
                     self.report.safe_in_time += 1;
                 } else {
                     result = Err(format!(
-                        "duties at 0 {:.1} ms after the last command reached the board (limit {:.1} ms: watchdog, one gateway loop, 2 ms, {} resends, {:.1} ms starved of CPU)",
+                        "duties at 0 {:.1} ms after the last command reached the board (the first at {:.1} ms; limit {:.1} ms: watchdog, one gateway loop, 2 ms, {} resends, {:.1} ms starved of CPU)",
                         took as f64 / 1e6,
+                        first.saturating_sub(last) as f64 / 1e6,
                         limit as f64 / 1e6,
                         lost_round_trips,
                         starved as f64 / 1e6
