@@ -107,8 +107,10 @@ pub struct Gateway {
     tick: u64,
     stop: Arc<AtomicBool>,
     announced: bool,
-    /// When the last setpoint arrived.
-    last_command: Option<Instant>,
+    /// When the newest setpoint forwarded was sent (its frame's `t_send_ns`, CLOCK_MONOTONIC).
+    last_command: Option<u64>,
+    /// When the watchdog last fired (ns): frames sent before it are not applied after it.
+    tripped_ns: u64,
     /// Counters.
     pub stats: Stats,
 }
@@ -132,6 +134,7 @@ impl Gateway {
             stop,
             announced: false,
             last_command: None,
+            tripped_ns: 0,
             stats: Stats::default(),
         }
     }
@@ -448,11 +451,27 @@ impl Gateway {
         let Some(rx) = self.commands.as_mut() else {
             return Ok(());
         };
-        let mut pending: Vec<(u32, f64)> = Vec::new();
+        // The watchdog goes by when a frame was sent, not when this loop got to it: a gateway
+        // that was behind (or starved of CPU) must not apply a dead controller's queued frames
+        // after the watchdog made the board safe. A frame without a send time counts as sent
+        // now.
+        let now = monotonic_ns();
+        let tripped = self.tripped_ns;
+        let mut stale = 0u64;
+        let mut pending: Vec<(u32, f64, u64)> = Vec::new();
         rx.drain(|frame| {
-            pending.extend(frame.setpoints().iter().map(|s| (s.index, s.value)));
+            let sent = match frame.t_send_ns {
+                0 => now,
+                t => t.min(now),
+            };
+            if tripped > 0 && sent <= tripped {
+                stale += frame.setpoints().len() as u64;
+                return;
+            }
+            pending.extend(frame.setpoints().iter().map(|s| (s.index, s.value, sent)));
         })?;
-        for (index, value) in pending {
+        self.stats.rejected += stale;
+        for (index, value, sent) in pending {
             let Some(s) = self.states.get_mut(index as usize) else {
                 self.stats.rejected += 1;
                 continue;
@@ -468,7 +487,7 @@ impl Gateway {
                 self.stats.rejected += 1;
                 continue;
             };
-            self.last_command = Some(Instant::now());
+            self.last_command = Some(self.last_command.map_or(sent, |l| l.max(sent)));
             if self.set(link, index as usize, id, v)? {
                 let s = &mut self.states[index as usize];
                 s.status &= !(status::REJECTED | status::CLAMPED | status::WATCHDOG);
@@ -527,9 +546,11 @@ impl Gateway {
         let (Some(limit), Some(last)) = (self.opts.watchdog, self.last_command) else {
             return Ok(());
         };
-        if last.elapsed() < limit {
+        let now = monotonic_ns();
+        if now.saturating_sub(last) < limit.as_nanos() as u64 {
             return Ok(());
         }
+        self.tripped_ns = now;
         self.stats.watchdog_trips += 1;
         let mut names = Vec::new();
         for i in 0..self.states.len() {
