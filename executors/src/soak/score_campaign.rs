@@ -905,19 +905,31 @@ impl Run {
         )
         .map_err(|e| e.to_string())?;
         self.report.controller_deaths += 1;
-        // Both duties at 0: when?
+        // Both duties at 0: when? A run of zeros that lasts 50 ms: a frame of the controller's
+        // with both values below 0 % (clamped to 0) makes one moment of zeros, and a gateway
+        // behind applies frames a few ms apart, so a moment is not the safe state.
         let wait_until =
             Instant::now() + Duration::from_nanos(self.c.watchdog_ns) + Duration::from_secs(5);
+        let mut zeros: Option<(u64, u64, u64)> = None;
         let safe_at = loop {
             let b = self.c.board.record();
             if b.all_off() {
-                let at = b.duty.iter().map(|d| d.1).max().unwrap_or(0).max(t);
-                let first = b.duty.iter().map(|d| d.1).min().unwrap_or(0).max(t);
-                break Some((at, b.last_nonzero_ns.max(t), first));
+                if zeros.is_none() {
+                    let at = b.duty.iter().map(|d| d.1).max().unwrap_or(0).max(t);
+                    let first = b.duty.iter().map(|d| d.1).min().unwrap_or(0).max(t);
+                    zeros = Some((at, b.last_nonzero_ns.max(t), first));
+                }
+            } else {
+                zeros = None;
             }
             drop(b);
+            if let Some(z) = zeros {
+                if monotonic_ns().saturating_sub(z.0) >= 50_000_000 {
+                    break Some(z);
+                }
+            }
             if Instant::now() > wait_until {
-                break None;
+                break zeros;
             }
             std::thread::sleep(Duration::from_millis(1));
         };
