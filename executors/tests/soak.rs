@@ -1,8 +1,9 @@
 //! The fault campaign for one minute, as CI runs it: `conductor-soak` drives the simulated
-//! robots of deploy/ (the Dynamixel leg, the MIT leg over SLCAN) through byte faults on every
-//! bus, unplugs, executor and controller kills, controller stalls and command floods, and
-//! checks them from outside. Every check must pass: no wrong value published or written,
-//! every safe state in time, every fault counted, nothing growing.
+//! robots of deploy/ (the Dynamixel leg, the MIT leg over SLCAN, the Score board under its
+//! gateway) through byte faults on every bus, unplugs, executor, gateway and controller kills,
+//! controller stalls and command floods, and checks them from outside. Every check must pass:
+//! no wrong value published or written, every safe state in time, every fault counted, nothing
+//! growing.
 
 use std::process::{Command, Stdio};
 
@@ -75,6 +76,31 @@ fn a_minute_of_faults_passes_every_check() {
             );
         }
     }
+    // The Score board: its own rows, every kind injected, nothing wrong, every death safe.
+    let b = &report["board"];
+    assert_eq!(b["subsystem"], "score-rp2040", "{table}");
+    assert_eq!(b["wrong_published"], 0, "{table}");
+    assert_eq!(b["wrong_written"], 0, "{table}");
+    assert_eq!(b["unsafe_events"], 0, "{table}");
+    assert!(b["samples_checked"].as_u64().unwrap() > 1000, "{table}");
+    assert!(b["writes_checked"].as_u64().unwrap() > 1000, "{table}");
+    assert_eq!(b["safe_in_time"], b["controller_deaths"], "{table}");
+    for kind in [
+        "unplug",
+        "gateway_kill",
+        "controller_kill",
+        "controller_stall",
+        "flood",
+    ] {
+        let k = &b["faults"][kind];
+        assert!(
+            k["injected"].as_u64().unwrap_or(0) > 0 && k["recovered"] == k["injected"],
+            "score-rp2040: {kind}: {table}"
+        );
+    }
+    // Damaged frames were sent both ways, and the board's CRC check dropped those it got.
+    assert!(b["damaged_to_host"].as_u64().unwrap() > 0, "{table}");
+    assert!(b["rejected_by_board"].as_u64().unwrap() > 0, "{table}");
     let _ = std::fs::remove_file(&json);
     let _ = std::fs::remove_file(&log);
 }

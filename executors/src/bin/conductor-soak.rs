@@ -18,7 +18,9 @@ fn main() -> ExitCode {
     main_with_args(
         std::env::args_os(),
         Context {
-            controller: vec![me, "controller".into()],
+            controller: vec![me.clone(), "controller".into()],
+            board_controller: vec![me.clone(), "score-controller".into()],
+            gateway: vec![me, "score-gateway".into()],
             executor: conductor_executor::launcher::default_executor(),
             executor_args: Vec::new(),
         },

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
 
-use super::{controller, rig, Fault, EVENTS};
+use super::{controller, rig, score_campaign, BoardOptions, Fault, EVENTS};
 
 #[derive(Parser)]
 #[command(
@@ -61,6 +61,17 @@ struct RunArgs {
     /// decides the timings).
     #[arg(long)]
     no_rt: bool,
+    /// Probability that a byte on the Score board's USB link is corrupted (USB's own CRC makes
+    /// this rare on a real link; at the legs' 0.5 % the gateway's configuration handling fails,
+    /// see RELIABILITY.md).
+    #[arg(long, default_value_t = 0.0001)]
+    board_corrupt: f64,
+    /// Probability that a byte on the Score board's USB link is lost.
+    #[arg(long, default_value_t = 0.0001)]
+    board_drop: f64,
+    /// Leave the Score board out (the two legs only).
+    #[arg(long)]
+    no_board: bool,
 }
 
 /// The fault kinds of `--faults`.
@@ -109,6 +120,16 @@ enum Cmd {
         #[arg(long = "joint", value_parser = rig::Joint::from_arg)]
         joints: Vec<rig::Joint>,
     },
+    /// The Score board's controller process.
+    #[command(hide = true)]
+    ScoreController {
+        #[arg(long)]
+        domain: String,
+        #[arg(long)]
+        rate_hz: f64,
+        #[arg(long)]
+        seed: u64,
+    },
 }
 
 fn duration(s: &str) -> Result<Duration, String> {
@@ -141,6 +162,11 @@ pub struct Context {
     pub executor: PathBuf,
     /// See `executor`.
     pub executor_args: Vec<std::ffi::OsString>,
+    /// The program and arguments that run the Score board's controller (`… score-controller`).
+    pub board_controller: Vec<String>,
+    /// The program and arguments that run the board's gateway (`… score-gateway`): the
+    /// launcher appends the gateway's own arguments.
+    pub gateway: Vec<String>,
 }
 
 /// `conductor-soak` / `conductor soak` with `argv` (its first item is the program's name).
@@ -148,10 +174,34 @@ pub fn main_with_args(
     argv: impl IntoIterator<Item = std::ffi::OsString>,
     ctx: Context,
 ) -> ExitCode {
+    let argv: Vec<std::ffi::OsString> = argv.into_iter().collect();
+    // The launcher runs the board's gateway as `<program> score-gateway <its arguments>`.
+    if argv.get(1).is_some_and(|a| a == "score-gateway") {
+        return score_gateway::main_with_args(argv[1..].iter().cloned());
+    }
     let cli = match Cli::try_parse_from(argv) {
         Ok(c) => c,
         Err(e) => e.exit(),
     };
+    if let Some(Cmd::ScoreController {
+        domain,
+        rate_hz,
+        seed,
+    }) = cli.cmd
+    {
+        let args = score_campaign::ControllerArgs {
+            domain,
+            rate_hz,
+            seed,
+        };
+        return match score_campaign::run_controller(&args) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("soak score controller: {e}");
+                ExitCode::from(2)
+            }
+        };
+    }
     if let Some(Cmd::Controller {
         domain,
         subsystem,
@@ -196,6 +246,12 @@ pub fn main_with_args(
         controller: ctx.controller,
         faults: r.faults.0,
         rt: !r.no_rt,
+        board: (!r.no_board).then(|| BoardOptions {
+            controller: ctx.board_controller,
+            gateway: ctx.gateway,
+            corrupt: r.board_corrupt,
+            drop: r.board_drop,
+        }),
     };
     let report = match super::run(&opts) {
         Ok(r) => r,

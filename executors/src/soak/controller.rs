@@ -41,7 +41,7 @@ pub struct ControllerArgs {
 /// A writer of raw command frames, as a foreign program (another language through the ABI, a
 /// buggy one) can send them: the client library refuses NaN and infinite values before they
 /// leave, so this goes around it to see what the executor does with them.
-struct RawSender {
+pub(super) struct RawSender {
     _node: Node<RtIpc>,
     _service:
         iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, CommandFrame, ()>,
@@ -49,7 +49,10 @@ struct RawSender {
 }
 
 impl RawSender {
-    fn open(domain: &Domain, subsystem: &str) -> Result<Self, Box<dyn std::error::Error>> {
+    pub(super) fn open(
+        domain: &Domain,
+        subsystem: &str,
+    ) -> Result<Self, Box<dyn std::error::Error>> {
         let name: NodeName = format!("soak-raw-{}", std::process::id())
             .as_str()
             .try_into()?;
@@ -72,7 +75,7 @@ impl RawSender {
         })
     }
 
-    fn send(&self, frame: &CommandFrame) -> Result<(), Box<dyn std::error::Error>> {
+    pub(super) fn send(&self, frame: &CommandFrame) -> Result<(), Box<dyn std::error::Error>> {
         let sample = self.port.loan_uninit()?;
         sample.write_payload(*frame).send()?;
         Ok(())

@@ -25,6 +25,8 @@ pub mod monitor;
 pub mod procs;
 pub mod report;
 pub mod rig;
+pub mod score_campaign;
+pub mod score_rig;
 
 use std::io::{BufRead, BufReader, Write};
 use std::path::PathBuf;
@@ -73,6 +75,21 @@ pub struct Options {
     /// campaign's own threads (simulators, monitor) `SCHED_FIFO` just below them, so that other
     /// work on the machine does not decide the result. Off: everything at normal scheduling.
     pub rt: bool,
+    /// The Score board: its programs and its link's byte faults. `None`: the legs only.
+    pub board: Option<BoardOptions>,
+}
+
+/// The Score board's part (see [`score_campaign`]).
+#[derive(Debug, Clone)]
+pub struct BoardOptions {
+    /// Its controller, before the controller's own arguments.
+    pub controller: Vec<String>,
+    /// The gateway (`score-gateway`, or a program running its main), before its arguments.
+    pub gateway: Vec<String>,
+    /// Probability that a byte on the board's USB link is corrupted.
+    pub corrupt: f64,
+    /// Probability that a byte on the board's USB link is lost.
+    pub drop: f64,
 }
 
 /// The `SCHED_FIFO` priority of the campaign's threads (simulators, monitor): below the
@@ -222,11 +239,19 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
     let dxl = Robot::dynamixel(&dxl_link, o.corrupt, o.drop, o.seed).map_err(io)?;
     let can = Robot::mit_slcan(&can_link, o.corrupt, o.drop, o.seed ^ 0xCA).map_err(io)?;
     let manifest = dir.join("soak.toml");
-    std::fs::write(
-        &manifest,
-        rig::manifest(&o.root, &dxl_link, &can_link).map_err(io)?,
-    )
-    .map_err(io)?;
+    let mut text = rig::manifest(&o.root, &dxl_link, &can_link).map_err(io)?;
+    // The Score board: its simulator on a pty and the gateway table of deploy/score-board.toml.
+    let board = match &o.board {
+        Some(b) => {
+            let link = score_campaign::link_path(dir);
+            text.push_str(&score_rig::manifest_section(&o.root, &link).map_err(io)?);
+            let sim =
+                score_rig::BoardSim::start(&link, b.corrupt, b.drop, o.seed ^ 0x5C).map_err(io)?;
+            Some(Arc::new(sim))
+        }
+        None => None,
+    };
+    std::fs::write(&manifest, text).map_err(io)?;
     let domain = Domain::unique("soak").map_err(|e| e.to_string())?;
     let members: Vec<Member> = [dxl, can]
         .into_iter()
@@ -265,6 +290,15 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
             // Only the campaign's kills (a few a minute) are expected; a crash of its own
             // shows as a restart the campaign did not cause.
             max_restarts: 50,
+            gateway: o
+                .board
+                .as_ref()
+                .map_or_else(crate::launcher::default_gateway, |b| {
+                    b.gateway[0].clone().into()
+                }),
+            gateway_args: o.board.as_ref().map_or_else(Vec::new, |b| {
+                b.gateway[1..].iter().map(Into::into).collect()
+            }),
             ..LaunchOptions::default()
         },
     );
@@ -287,7 +321,22 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
         last_sample: Instant::now(),
         started: Instant::now(),
     };
+    let board_run = match (&board, &o.board) {
+        (Some(sim), Some(p)) => Some(score_campaign::spawn(score_campaign::BoardCampaign {
+            board: sim.clone(),
+            domain: c.domain.clone(),
+            controller: p.controller.clone(),
+            rate_hz: o.rate_hz,
+            seed: o.seed,
+            watchdog_ns: score_rig::watchdog_ns(&o.root).map_err(io)?,
+            end: c.started + o.duration,
+            started: c.started,
+            link_faults: (p.corrupt, p.drop),
+        })),
+        _ => None,
+    };
     let outcome = c.campaign();
+    let board_out = board_run.map(|t| t.join());
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
     let monitor = eyes
         .join()
@@ -298,7 +347,31 @@ fn run_in(o: &Options, dir: &std::path::Path) -> Result<Report, String> {
     if let Err(e) = outcome {
         c.failures.push(e);
     }
-    Ok(c.finish())
+    let board_out = match board_out {
+        Some(Ok(mut b)) => {
+            b.report.gateway_restarts = c
+                .launch
+                .executors()
+                .iter()
+                .find(|e| e.subsystem == score_rig::SUBSYSTEM)
+                .map_or(0, |e| e.restarts as u64);
+            for (name, v) in std::mem::take(&mut b.resources.processes) {
+                c.resources.processes.entry(name).or_default().extend(v);
+            }
+            c.failures.append(&mut b.failures);
+            Some(b.report)
+        }
+        Some(Err(_)) => {
+            c.failures.push("the board's campaign panicked".into());
+            None
+        }
+        None => None,
+    };
+    let mut report = c.finish();
+    if let Some(b) = board_out {
+        report.add_board(b);
+    }
+    Ok(report)
 }
 
 impl Campaign<'_> {

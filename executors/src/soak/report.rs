@@ -386,6 +386,9 @@ pub struct Report {
     pub checks: Vec<Check>,
     /// Failures seen while running (recoveries that did not come, a launch that did not stop).
     pub failures: Vec<String>,
+    /// The Score board's part, when it ran (see `score_campaign`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub board: Option<super::score_campaign::BoardReport>,
     /// Every check passed and nothing failed.
     pub passed: bool,
 }
@@ -520,6 +523,7 @@ impl Report {
             resources,
             checks,
             failures,
+            board: None,
             passed,
         }
     }
@@ -602,6 +606,9 @@ impl Report {
                 r.wrong_written,
                 r.writes_checked
             );
+        }
+        if let Some(b) = &self.board {
+            t.push_str(&b.table());
         }
         for c in self.checks.iter().filter(|c| !c.ok) {
             let _ = writeln!(t, "FAILED  {}: {}", c.name, c.detail);

@@ -101,11 +101,16 @@ pub struct Gateway {
     clock: ClockMap,
     generation: Option<u32>,
     script: Vec<String>,
+    /// A restore was started and has not finished (its link was lost): what the board holds
+    /// is part of it, not the board's own configuration.
+    restore_unfinished: bool,
     tick: u64,
     stop: Arc<AtomicBool>,
     announced: bool,
-    /// When the last setpoint arrived.
-    last_command: Option<Instant>,
+    /// When the newest setpoint forwarded was sent (its frame's `t_send_ns`, CLOCK_MONOTONIC).
+    last_command: Option<u64>,
+    /// When the watchdog last fired (ns): frames sent before it are not applied after it.
+    tripped_ns: u64,
     /// Counters.
     pub stats: Stats,
 }
@@ -124,10 +129,12 @@ impl Gateway {
             clock: ClockMap::new(),
             generation: None,
             script: Vec::new(),
+            restore_unfinished: false,
             tick: 0,
             stop,
             announced: false,
             last_command: None,
+            tripped_ns: 0,
             stats: Stats::default(),
         }
     }
@@ -250,7 +257,26 @@ impl Gateway {
     /// extends the states, and subscribes every variable.
     fn sync(&mut self, link: &mut Link) -> Result<(), GatewayError> {
         let (mut vars, mut generation) = Self::list(link)?;
+        if self.restore_unfinished && !vars.is_empty() {
+            // The last restore lost its link half-way (an `Exec` is not repeated): the board
+            // holds part of the configuration. Clear it (a variable others depend on goes in
+            // a later pass) and restore from the start.
+            eprintln!(
+                "score-gateway: the last restore was interrupted; clearing its {} variables to restore again",
+                vars.len()
+            );
+            for _ in 0..4 {
+                for v in &vars {
+                    Self::exec(link, &format!("del {}", v.name))?;
+                }
+                (vars, generation) = Self::list(link)?;
+                if vars.is_empty() {
+                    break;
+                }
+            }
+        }
         if vars.is_empty() && self.opts.restore && !self.script.is_empty() {
+            self.restore_unfinished = true;
             eprintln!(
                 "score-gateway: the board's table is empty; restoring its last configuration ({} lines)",
                 self.script.len()
@@ -266,17 +292,29 @@ impl Gateway {
                 }
             }
             self.stats.restores += 1;
+            self.restore_unfinished = false;
             (vars, generation) = Self::list(link)?;
         }
         if !vars.is_empty() {
-            let (text, ok) = Self::exec(link, "save")?;
-            if ok {
-                self.script = text
-                    .lines()
-                    .map(str::trim)
-                    .filter(|l| !l.is_empty() && !l.starts_with('#'))
-                    .map(String::from)
-                    .collect();
+            // The script comes back in several `Output` frames and nothing says how many: one
+            // lost on the link would leave a script missing lines, which a restore would then
+            // replay. Kept only when two answers in a row agree.
+            let mut previous: Option<String> = None;
+            for _ in 0..4 {
+                let (text, ok) = Self::exec(link, "save")?;
+                if !ok {
+                    break;
+                }
+                if previous.as_deref() == Some(text.as_str()) {
+                    self.script = text
+                        .lines()
+                        .map(str::trim)
+                        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+                        .map(String::from)
+                        .collect();
+                    break;
+                }
+                previous = Some(text);
             }
         }
         self.update_states(&vars)?;
@@ -413,11 +451,27 @@ impl Gateway {
         let Some(rx) = self.commands.as_mut() else {
             return Ok(());
         };
-        let mut pending: Vec<(u32, f64)> = Vec::new();
+        // The watchdog goes by when a frame was sent, not when this loop got to it: a gateway
+        // that was behind (or starved of CPU) must not apply a dead controller's queued frames
+        // after the watchdog made the board safe. A frame without a send time counts as sent
+        // now.
+        let now = monotonic_ns();
+        let tripped = self.tripped_ns;
+        let mut stale = 0u64;
+        let mut pending: Vec<(u32, f64, u64)> = Vec::new();
         rx.drain(|frame| {
-            pending.extend(frame.setpoints().iter().map(|s| (s.index, s.value)));
+            let sent = match frame.t_send_ns {
+                0 => now,
+                t => t.min(now),
+            };
+            if tripped > 0 && sent <= tripped {
+                stale += frame.setpoints().len() as u64;
+                return;
+            }
+            pending.extend(frame.setpoints().iter().map(|s| (s.index, s.value, sent)));
         })?;
-        for (index, value) in pending {
+        self.stats.rejected += stale;
+        for (index, value, sent) in pending {
             let Some(s) = self.states.get_mut(index as usize) else {
                 self.stats.rejected += 1;
                 continue;
@@ -433,7 +487,7 @@ impl Gateway {
                 self.stats.rejected += 1;
                 continue;
             };
-            self.last_command = Some(Instant::now());
+            self.last_command = Some(self.last_command.map_or(sent, |l| l.max(sent)));
             if self.set(link, index as usize, id, v)? {
                 let s = &mut self.states[index as usize];
                 s.status &= !(status::REJECTED | status::CLAMPED | status::WATCHDOG);
@@ -492,10 +546,11 @@ impl Gateway {
         let (Some(limit), Some(last)) = (self.opts.watchdog, self.last_command) else {
             return Ok(());
         };
-        if last.elapsed() < limit {
+        let now = monotonic_ns();
+        if now.saturating_sub(last) < limit.as_nanos() as u64 {
             return Ok(());
         }
-        self.last_command = None;
+        self.tripped_ns = now;
         self.stats.watchdog_trips += 1;
         let mut names = Vec::new();
         for i in 0..self.states.len() {
@@ -504,6 +559,8 @@ impl Gateway {
                 continue;
             };
             let (safe, _) = s.meta.clamp(0.0);
+            // A link lost here leaves the watchdog armed: it fires again on the next
+            // connection, so the board does not keep the dead controller's value.
             let ok = self.set(link, i, id, safe)?;
             let s = &mut self.states[i];
             s.commanded = false;
@@ -512,6 +569,7 @@ impl Gateway {
                 names.push(format!("{} = {safe}", s.name));
             }
         }
+        self.last_command = None;
         eprintln!(
             "score-gateway: no command for {} ms: {}",
             limit.as_millis(),

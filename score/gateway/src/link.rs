@@ -16,6 +16,13 @@ use crate::error::GatewayError;
 /// How long a request may take (a board answers in a few ms; `save` of a full table in tens).
 pub const REPLY_TIMEOUT: Duration = Duration::from_secs(3);
 
+/// A request that can be repeated without effect (all but `Exec`) and has no answer after this
+/// long is sent again with the same sequence number: a frame damaged on the link (its CRC
+/// fails, the receiver drops it) costs this instead of [`REPLY_TIMEOUT`] and a reconnection.
+/// The board answers within a few ms; a duplicate `Set` writes the same value twice and its
+/// late answer is ignored (its sequence number is no longer awaited).
+pub const RESEND_AFTER: Duration = Duration::from_millis(20);
+
 /// A variable as the board lists it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BoardVar {
@@ -160,17 +167,27 @@ impl Link {
         let mut frame = [0u8; MAX_FRAME];
         let n = encode_request(seq, &req, &mut frame)
             .map_err(|e| GatewayError::Protocol(e.to_string()))?;
-        self.port
-            .write_all(&frame[..n])
-            .and_then(|_| self.port.flush())
-            .map_err(|e| GatewayError::Disconnected(e.to_string()))?;
+        let repeatable = !matches!(req, Request::Exec { .. });
         let end = Instant::now() + REPLY_TIMEOUT;
         let mut vars = Vec::new();
         let mut text = String::new();
         let mut done: Option<Result<Answer, GatewayError>> = None;
+        let mut sent: Option<Instant> = None;
+        // A listing that ended with fewer entries than it announced lost one on the way.
+        let mut short_list = false;
         while done.is_none() {
             if Instant::now() > end {
                 return Err(GatewayError::Timeout(format!("{req:?}")));
+            }
+            let resend = repeatable && sent.is_some_and(|t| t.elapsed() >= RESEND_AFTER);
+            if sent.is_none() || resend || short_list {
+                vars.clear();
+                short_list = false;
+                self.port
+                    .write_all(&frame[..n])
+                    .and_then(|_| self.port.flush())
+                    .map_err(|e| GatewayError::Disconnected(e.to_string()))?;
+                sent = Some(Instant::now());
             }
             self.read_into(&mut |s, r| {
                 if s != seq {
@@ -194,8 +211,12 @@ impl Link {
                         });
                         None
                     }
-                    Reply::ListEnd { generation, .. } => {
+                    Reply::ListEnd { generation, count } if count as usize == vars.len() => {
                         Some(Ok(Answer::Vars(std::mem::take(&mut vars), generation)))
+                    }
+                    Reply::ListEnd { .. } => {
+                        short_list = true;
+                        None
                     }
                     Reply::Ack => Some(Ok(Answer::Ack)),
                     Reply::SetDone { value } => Some(Ok(Answer::Set(value))),

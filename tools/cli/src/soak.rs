@@ -21,6 +21,12 @@ pub fn run(args: &[OsString]) -> ExitCode {
         argv,
         Context {
             controller: vec![me.display().to_string(), "soak".into(), "controller".into()],
+            board_controller: vec![
+                me.display().to_string(),
+                "soak".into(),
+                "score-controller".into(),
+            ],
+            gateway: vec![me.display().to_string(), "soak".into(), "score-gateway".into()],
             executor: me,
             executor_args: vec!["__executor".into()],
         },
