@@ -69,12 +69,12 @@ impl Bus {
         domain.prepare_dirs()?;
         let name = node_name
             .try_into()
-            .map_err(|e| BusError::iox(format!("node name {node_name:?}"), e))?;
+            .map_err(|e| BusError::iceoryx(format!("node name {node_name:?}"), e))?;
         let node = NodeBuilder::new()
             .name(&name)
             .config(domain.iceoryx2_config())
             .create::<RtIpc>()
-            .map_err(|e| BusError::iox(format!("joining domain {:?}", domain.name()), e))?;
+            .map_err(|e| BusError::iceoryx(format!("joining domain {:?}", domain.name()), e))?;
         Ok(Self {
             inner: Rc::new(Inner {
                 domain: domain.clone(),
@@ -99,7 +99,7 @@ impl Bus {
 
     pub(crate) fn service_name(name: &str) -> Result<ServiceName> {
         name.try_into()
-            .map_err(|e| BusError::iox(format!("service name {name:?}"), e))
+            .map_err(|e| BusError::iceoryx(format!("service name {name:?}"), e))
     }
 
     /// Static details of a service, if it exists.
@@ -113,7 +113,7 @@ impl Bus {
             self.domain().iceoryx2_config(),
             pattern,
         )
-        .map_err(|e| BusError::iox(format!("reading service {name:?}"), e))
+        .map_err(|e| BusError::iceoryx(format!("reading service {name:?}"), e))
     }
 
     /// Checks that an existing service is a Conductor service of `kind` speaking our ABI.
@@ -196,8 +196,8 @@ impl Bus {
             Ok(f) => Ok(f),
             Err(CE::AlreadyExists) | Err(CE::IsBeingCreatedByAnotherInstance) => builder()
                 .open_with_attributes(&verifier(attrs)?)
-                .map_err(|e| BusError::iox(format!("re-opening {name:?} as its owner"), e)),
-            Err(e) => Err(BusError::iox(format!("creating {name:?}"), e)),
+                .map_err(|e| BusError::iceoryx(format!("re-opening {name:?} as its owner"), e)),
+            Err(e) => Err(BusError::iceoryx(format!("creating {name:?}"), e)),
         }
     }
 
@@ -213,7 +213,7 @@ impl Bus {
             .open_or_create_with_attributes(&verifier(&metadata::base_attributes(
                 ServiceKind::Tick,
             )?)?)
-            .map_err(|e| BusError::iox(format!("opening tick event {name:?}"), e))
+            .map_err(|e| BusError::iceoryx(format!("opening tick event {name:?}"), e))
     }
 }
 
@@ -223,7 +223,7 @@ fn verifier(spec: &AttributeSpecifier) -> Result<AttributeVerifier> {
     for a in spec.attributes().iter() {
         v = v
             .require(a.key(), a.value())
-            .map_err(|e| BusError::iox("attribute verifier", e))?;
+            .map_err(|e| BusError::iceoryx("attribute verifier", e))?;
     }
     Ok(v)
 }

@@ -166,11 +166,11 @@ impl Controller {
             let sample = ob
                 .port
                 .loan_uninit()
-                .map_err(|e| BusError::iox("loaning a command frame", e))?;
+                .map_err(|e| BusError::iceoryx("loaning a command frame", e))?;
             let receivers = sample
                 .write_payload(ob.frame)
                 .send()
-                .map_err(|e| BusError::iox("sending a command frame", e))?;
+                .map_err(|e| BusError::iceoryx("sending a command frame", e))?;
             if receivers == 0 && undelivered.is_none() {
                 undelivered = Some(i);
             }
@@ -226,11 +226,11 @@ fn open_outbox(bus: &Bus, subsystem: &str) -> Result<Outbox> {
         .service_builder(&Bus::service_name(&name)?)
         .publish_subscribe::<CommandFrame>()
         .open()
-        .map_err(|e| BusError::iox(format!("opening {name:?}"), e))?;
+        .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
     let port = service
         .publisher_builder()
         .create()
-        .map_err(|e| BusError::iox(format!("command publisher on {name:?}"), e))?;
+        .map_err(|e| BusError::iceoryx(format!("command publisher on {name:?}"), e))?;
     Ok(Outbox {
         subsystem: subsystem.into(),
         port,
@@ -274,11 +274,11 @@ impl CommandSender {
         let sample = ob
             .port
             .loan_uninit()
-            .map_err(|e| BusError::iox("loaning a command frame", e))?;
+            .map_err(|e| BusError::iceoryx("loaning a command frame", e))?;
         sample
             .write_payload(ob.frame)
             .send()
-            .map_err(|e| BusError::iox("sending a command frame", e))?;
+            .map_err(|e| BusError::iceoryx("sending a command frame", e))?;
         Ok(())
     }
 }

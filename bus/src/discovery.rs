@@ -102,7 +102,7 @@ impl Bus {
             });
             CallbackProgression::Continue
         })
-        .map_err(|e| BusError::iox("listing services", e))?;
+        .map_err(|e| BusError::iceoryx("listing services", e))?;
         out.sort_by(|a, b| {
             (a.subsystem.as_str(), a.meta.index).cmp(&(b.subsystem.as_str(), b.meta.index))
         });

@@ -52,10 +52,10 @@ impl Domain {
         let mut config = Config::default();
         let prefix = prefix(name);
         config.global.prefix =
-            FileName::new(prefix.as_bytes()).map_err(|e| BusError::iox("domain prefix", e))?;
+            FileName::new(prefix.as_bytes()).map_err(|e| BusError::iceoryx("domain prefix", e))?;
         let root = root_path(name);
         config.global.set_root_path(
-            &Path::new(root.as_bytes()).map_err(|e| BusError::iox("domain root path", e))?,
+            &Path::new(root.as_bytes()).map_err(|e| BusError::iceoryx("domain root path", e))?,
         );
         Ok(Self {
             name: name.into(),

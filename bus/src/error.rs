@@ -1,5 +1,22 @@
 //! Typed errors of the bus API.
 
+use std::borrow::Cow;
+
+use iceoryx2::node::{NodeCreationFailure, NodeListFailure};
+use iceoryx2::port::listener::{ListenerCreateError, ListenerWaitError};
+use iceoryx2::port::notifier::{NotifierCreateError, NotifierNotifyError};
+use iceoryx2::port::publisher::PublisherCreateError;
+use iceoryx2::port::subscriber::SubscriberCreateError;
+use iceoryx2::port::{LoanError, ReceiveError, SendError};
+use iceoryx2::prelude::SemanticStringError;
+use iceoryx2::service::attribute::AttributeDefinitionError;
+use iceoryx2::service::builder::event::EventOpenOrCreateError;
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeCreateError, PublishSubscribeOpenError,
+};
+use iceoryx2::service::service_name::ServiceNameError;
+use iceoryx2::service::{ServiceDetailsError, ServiceListError};
+use nix::errno::Errno;
 use thiserror::Error;
 
 /// Everything that can go wrong on the bus, with enough context to act on it.
@@ -14,6 +31,15 @@ pub enum BusError {
         name: String,
         /// What was expected.
         reason: &'static str,
+    },
+    /// A state index past the publisher's states (a caller's bug; reported without allocating,
+    /// as it is found on the real-time path).
+    #[error("state index {index} out of range ({count} states)")]
+    NoSuchIndex {
+        /// The index given.
+        index: usize,
+        /// How many states the publisher has.
+        count: usize,
     },
     /// No state of that name exists in the domain (the owning executor is not running?).
     #[error("unknown state {name:?} in domain {domain:?}{}", hint(known))]
@@ -143,14 +169,91 @@ pub enum BusError {
         /// What is wrong and how to fix it.
         reason: String,
     },
-    /// A failure inside iceoryx2, with what we were doing.
-    #[error("{context}: {detail}")]
+    /// A failure inside iceoryx2, with what we were doing. The cause is iceoryx2's own `Copy`
+    /// error, kept typed: match on `source`, not on the message. Built without allocating when
+    /// `context` is a literal (the real-time paths: loaning, sending, receiving, notifying).
+    #[error("{context}: {source}")]
     Iceoryx {
         /// What the bus was doing.
-        context: String,
+        context: Cow<'static, str>,
         /// iceoryx2's error.
-        detail: String,
+        #[source]
+        source: IceoryxError,
     },
+    /// A system call the bus makes itself (beside iceoryx2) failed.
+    #[error("{context}: {source}")]
+    Os {
+        /// What the bus was doing.
+        context: &'static str,
+        /// The OS's error number.
+        #[source]
+        source: Errno,
+    },
+}
+
+/// An iceoryx2 error, one variant per iceoryx2 error type the bus meets. Every one is
+/// iceoryx2's own `Copy` enum, so this is `Copy` too and costs nothing to build on a
+/// real-time thread; its text is iceoryx2's.
+#[derive(Debug, Error, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum IceoryxError {
+    /// A node, file or path name iceoryx2 does not accept.
+    #[error(transparent)]
+    Name(#[from] SemanticStringError),
+    /// A service name iceoryx2 does not accept.
+    #[error(transparent)]
+    ServiceName(#[from] ServiceNameError),
+    /// Joining the domain as a node.
+    #[error(transparent)]
+    NodeCreation(#[from] NodeCreationFailure),
+    /// Listing the domain's nodes.
+    #[error(transparent)]
+    NodeList(#[from] NodeListFailure),
+    /// Listing the domain's services.
+    #[error(transparent)]
+    ServiceList(#[from] ServiceListError),
+    /// Reading a service's static record.
+    #[error(transparent)]
+    ServiceDetails(#[from] ServiceDetailsError),
+    /// Creating a publish-subscribe service.
+    #[error(transparent)]
+    PublishSubscribeCreate(#[from] PublishSubscribeCreateError),
+    /// Opening a publish-subscribe service.
+    #[error(transparent)]
+    PublishSubscribeOpen(#[from] PublishSubscribeOpenError),
+    /// Opening or creating an event service.
+    #[error(transparent)]
+    EventOpenOrCreate(#[from] EventOpenOrCreateError),
+    /// Defining a service attribute.
+    #[error(transparent)]
+    AttributeDefinition(#[from] AttributeDefinitionError),
+    /// Creating a publisher port.
+    #[error(transparent)]
+    PublisherCreate(#[from] PublisherCreateError),
+    /// Creating a subscriber port.
+    #[error(transparent)]
+    SubscriberCreate(#[from] SubscriberCreateError),
+    /// Creating a notifier port.
+    #[error(transparent)]
+    NotifierCreate(#[from] NotifierCreateError),
+    /// Creating a listener port.
+    #[error(transparent)]
+    ListenerCreate(#[from] ListenerCreateError),
+    /// Loaning a sample from a publisher.
+    #[error(transparent)]
+    Loan(#[from] LoanError),
+    /// Sending a sample.
+    #[error(transparent)]
+    Send(#[from] SendError),
+    /// Receiving a sample.
+    #[error(transparent)]
+    Receive(#[from] ReceiveError),
+    /// Notifying an event.
+    #[error(transparent)]
+    Notify(#[from] NotifierNotifyError),
+    /// Waiting on a listener.
+    #[error(transparent)]
+    ListenerWait(#[from] ListenerWaitError),
 }
 
 fn hint(known: &[String]) -> String {
@@ -162,11 +265,20 @@ fn hint(known: &[String]) -> String {
 }
 
 impl BusError {
-    /// Wraps an iceoryx2 error with what we were doing.
-    pub(crate) fn iox(context: impl Into<String>, e: impl core::fmt::Debug) -> Self {
+    /// Wraps an iceoryx2 error with what we were doing. With a literal `context` nothing is
+    /// allocated (the real-time paths use literals).
+    pub fn iceoryx(context: impl Into<Cow<'static, str>>, e: impl Into<IceoryxError>) -> Self {
         BusError::Iceoryx {
             context: context.into(),
-            detail: format!("{e:?}"),
+            source: e.into(),
+        }
+    }
+
+    /// The iceoryx2 error underneath, if this is one.
+    pub fn iceoryx_source(&self) -> Option<IceoryxError> {
+        match self {
+            BusError::Iceoryx { source, .. } => Some(*source),
+            _ => None,
         }
     }
 }

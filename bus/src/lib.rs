@@ -31,7 +31,7 @@ pub use clock::monotonic_ns;
 pub use controller::{CommandSender, Controller, SURFACE_HISTORY};
 pub use discovery::StateInfo;
 pub use domain::Domain;
-pub use error::{BusError, Result};
+pub use error::{BusError, IceoryxError, Result};
 pub use filter::Filter;
 pub use histogram::Histogram;
 pub use history::{History, Interpolation};

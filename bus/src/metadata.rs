@@ -107,17 +107,18 @@ impl Default for StateMeta {
 }
 
 fn key(k: &str) -> Result<AttributeKey> {
-    k.try_into().map_err(|e| BusError::iox("attribute key", e))
+    k.try_into()
+        .map_err(|e| BusError::iceoryx("attribute key", e))
 }
 
 fn value(v: &str) -> Result<AttributeValue> {
     v.try_into()
-        .map_err(|e| BusError::iox(format!("attribute value {v:?}"), e))
+        .map_err(|e| BusError::iceoryx(format!("attribute value {v:?}"), e))
 }
 
 fn define(spec: AttributeSpecifier, k: &str, v: &str) -> Result<AttributeSpecifier> {
     spec.define(&key(k)?, &value(v)?)
-        .map_err(|e| BusError::iox("define attribute", e))
+        .map_err(|e| BusError::iceoryx("define attribute", e))
 }
 
 /// The attributes every Conductor service carries: ABI version and kind.

@@ -92,7 +92,7 @@ impl StatePublisher {
             let port = service
                 .publisher_builder()
                 .create()
-                .map_err(|e| BusError::iox(format!("publisher for {name:?}"), e))?;
+                .map_err(|e| BusError::iceoryx(format!("publisher for {name:?}"), e))?;
             services.push(service);
             ports.push(port);
         }
@@ -100,7 +100,7 @@ impl StatePublisher {
         let notifier = tick
             .notifier_builder()
             .create()
-            .map_err(|e| BusError::iox("tick notifier", e))?;
+            .map_err(|e| BusError::iceoryx("tick notifier", e))?;
         Ok(Self {
             subsystem: subsystem.into(),
             seqs: vec![0; ports.len()],
@@ -137,15 +137,14 @@ impl StatePublisher {
         value: f64,
         status: u32,
     ) -> Result<usize> {
-        let port = self.ports.get(index).ok_or_else(|| BusError::InvalidName {
-            what: "state",
-            name: index.to_string(),
-            reason: "state index out of range",
+        let port = self.ports.get(index).ok_or(BusError::NoSuchIndex {
+            index,
+            count: self.ports.len(),
         })?;
         let seq = self.seqs[index];
         let sample = port
             .loan_uninit()
-            .map_err(|e| BusError::iox("loaning a state sample", e))?;
+            .map_err(|e| BusError::iceoryx("loaning a state sample", e))?;
         let sample = sample.write_payload(StateSample {
             seq,
             tick,
@@ -157,7 +156,7 @@ impl StatePublisher {
         });
         let reached = sample
             .send()
-            .map_err(|e| BusError::iox("sending a state sample", e))?;
+            .map_err(|e| BusError::iceoryx("sending a state sample", e))?;
         self.seqs[index] = seq + 1;
         Ok(reached)
     }
@@ -174,7 +173,7 @@ impl StatePublisher {
     pub fn notify_tick(&mut self) -> Result<usize> {
         self.notifier
             .notify()
-            .map_err(|e| BusError::iox("notifying tick", e))
+            .map_err(|e| BusError::iceoryx("notifying tick", e))
     }
 }
 
@@ -220,7 +219,7 @@ impl CommandReceiver {
             .subscriber_builder()
             .buffer_size(qos::COMMAND_BUFFER)
             .create()
-            .map_err(|e| BusError::iox("command subscriber", e))?;
+            .map_err(|e| BusError::iceoryx("command subscriber", e))?;
         Ok(Self {
             port,
             _service: service,
@@ -239,7 +238,7 @@ impl CommandReceiver {
                     n += 1;
                 }
                 Ok(None) => return Ok(n),
-                Err(e) => return Err(BusError::iox("receiving commands", e)),
+                Err(e) => return Err(BusError::iceoryx("receiving commands", e)),
             }
         }
     }
@@ -275,7 +274,7 @@ impl StatsPublisher {
         let port = service
             .publisher_builder()
             .create()
-            .map_err(|e| BusError::iox("stats publisher", e))?;
+            .map_err(|e| BusError::iceoryx("stats publisher", e))?;
         Ok(Self {
             port,
             _service: service,
@@ -287,13 +286,13 @@ impl StatsPublisher {
         let sample = self
             .port
             .loan_uninit()
-            .map_err(|e| BusError::iox("loaning stats", e))?;
+            .map_err(|e| BusError::iceoryx("loaning stats", e))?;
         let mut stats = ExecutorStats::default();
         fill(&mut stats);
         sample
             .write_payload(stats)
             .send()
-            .map_err(|e| BusError::iox("sending stats", e))?;
+            .map_err(|e| BusError::iceoryx("sending stats", e))?;
         Ok(())
     }
 }

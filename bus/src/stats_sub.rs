@@ -44,11 +44,11 @@ impl StatsSubscriber {
             .service_builder(&Bus::service_name(&name)?)
             .publish_subscribe::<ExecutorStats>()
             .open()
-            .map_err(|e| BusError::iox(format!("opening {name:?}"), e))?;
+            .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
         let port = service
             .subscriber_builder()
             .create()
-            .map_err(|e| BusError::iox("stats subscriber", e))?;
+            .map_err(|e| BusError::iceoryx("stats subscriber", e))?;
         Ok(Self {
             port,
             latest: None,
@@ -62,7 +62,7 @@ impl StatsSubscriber {
             match self.port.receive() {
                 Ok(Some(s)) => self.latest = Some(*s),
                 Ok(None) => return Ok(self.latest),
-                Err(e) => return Err(BusError::iox("receiving stats", e)),
+                Err(e) => return Err(BusError::iceoryx("receiving stats", e)),
             }
         }
     }

@@ -66,7 +66,7 @@ impl StateSubscriber {
             .subscriber_builder()
             .buffer_size(buffer.clamp(1, cap))
             .create()
-            .map_err(|e| BusError::iox(format!("subscribing to {service_name:?}"), e))?;
+            .map_err(|e| BusError::iceoryx(format!("subscribing to {service_name:?}"), e))?;
         Ok(Self {
             info,
             port,
@@ -90,7 +90,7 @@ impl StateSubscriber {
         let sample = match self.port.receive() {
             Ok(Some(s)) => *s,
             Ok(None) => return Ok(None),
-            Err(e) => return Err(BusError::iox("receiving a state sample", e)),
+            Err(e) => return Err(BusError::iceoryx("receiving a state sample", e)),
         };
         match self.next_seq {
             Some(expected) if sample.seq > expected => self.missed += sample.seq - expected,
@@ -158,6 +158,6 @@ pub(crate) fn open_error(
                 found: "an incompatible payload type".into(),
             }
         }
-        other => BusError::iox(format!("opening {service:?}"), other),
+        other => BusError::iceoryx(format!("opening {service:?}"), other),
     }
 }

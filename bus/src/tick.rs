@@ -33,7 +33,7 @@ impl TickWaiter {
         let listener = service
             .listener_builder()
             .create()
-            .map_err(|e| BusError::iox("tick listener", e))?;
+            .map_err(|e| BusError::iceoryx("tick listener", e))?;
         Ok(Self {
             listener,
             _service: service,
@@ -46,7 +46,7 @@ impl TickWaiter {
         let mut ticks = 0;
         self.listener
             .timed_wait(|activation| ticks += activation.count.max(1), timeout)
-            .map_err(|e| BusError::iox("waiting for a tick", e))?;
+            .map_err(|e| BusError::iceoryx("waiting for a tick", e))?;
         Ok(ticks)
     }
 
@@ -55,7 +55,7 @@ impl TickWaiter {
         let mut ticks = 0;
         self.listener
             .try_wait(|activation| ticks += activation.count.max(1))
-            .map_err(|e| BusError::iox("polling ticks", e))?;
+            .map_err(|e| BusError::iceoryx("polling ticks", e))?;
         Ok(ticks)
     }
 
@@ -83,9 +83,12 @@ impl TickWaiter {
         // descriptors belong to listeners that outlive the call.
         let r = unsafe { libc::poll(fds.as_mut_ptr(), waiters.len() as libc::nfds_t, ms) };
         if r < 0 {
-            let e = std::io::Error::last_os_error();
-            if e.kind() != std::io::ErrorKind::Interrupted {
-                return Err(BusError::iox("waiting for ticks", e));
+            let e = nix::errno::Errno::last();
+            if e != nix::errno::Errno::EINTR {
+                return Err(BusError::Os {
+                    context: "waiting for ticks",
+                    source: e,
+                });
             }
         }
         let mut ticks = [0u64; 16];

@@ -77,4 +77,54 @@ fn publishing_and_draining_allocate_nothing() {
     assert!(setpoints > 0.0);
     assert_eq!(sub.missed(), 0);
     assert_eq!(allocations, 0, "the per-tick path allocated");
+
+    // A bad index is refused on the same path, without allocating either.
+    let (refused, allocations) = measure(|| publisher.publish(3, 0, monotonic_ns(), 0.0, 0));
+    assert!(
+        matches!(
+            refused,
+            Err(conductor_bus::BusError::NoSuchIndex { index: 3, count: 3 })
+        ),
+        "{refused:?}"
+    );
+    assert_eq!(allocations, 0, "refusing a bad index allocated");
+}
+
+/// An iceoryx2 failure on the per-tick path (a loan or a send refused) becomes a `BusError`
+/// without allocating: the context is a literal and the cause iceoryx2's own `Copy` enum, which
+/// a caller matches on as a value, not as text.
+#[test]
+fn an_iceoryx2_error_on_the_tick_path_allocates_nothing() {
+    use conductor_bus::{BusError, IceoryxError};
+    use iceoryx2::port::{LoanError, SendError};
+
+    let (errors, allocations) = measure(|| {
+        [
+            BusError::iceoryx("loaning a state sample", LoanError::ExceedsMaxLoans),
+            BusError::iceoryx(
+                "sending a state sample",
+                SendError::LoanError(LoanError::OutOfMemory),
+            ),
+        ]
+    });
+    assert_eq!(allocations, 0, "building the errors allocated");
+    assert_eq!(
+        errors[0].iceoryx_source(),
+        Some(IceoryxError::Loan(LoanError::ExceedsMaxLoans))
+    );
+    assert!(matches!(
+        errors[1],
+        BusError::Iceoryx {
+            source: IceoryxError::Send(SendError::LoanError(LoanError::OutOfMemory)),
+            ..
+        }
+    ));
+    // The text for people still says what was being done and what iceoryx2 said, and the
+    // cause is reachable as the error's source.
+    assert_eq!(
+        errors[0].to_string(),
+        "loaning a state sample: LoanError::ExceedsMaxLoans"
+    );
+    let source = std::error::Error::source(&errors[0]).expect("a typed source");
+    assert_eq!(source.to_string(), "LoanError::ExceedsMaxLoans");
 }

@@ -61,6 +61,9 @@ pub struct LinkCounters {
     pub hardware: HwCounters,
     /// Transport errors that did not take the bus down.
     pub io_errors: u64,
+    /// The newest of those, as the OS numbered it (`None` for a full transmit side, which has no
+    /// number): kept typed, so the cause of `io_errors` is not lost.
+    pub last_io_error: Option<Errno>,
     /// Times the bus vanished.
     pub outages: u64,
     /// Times it was reopened.
@@ -306,7 +309,14 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
     fn on_error(&mut self, e: HwError, now_ns: u64) {
         match e {
             HwError::Disconnected(cause) => self.go_down(cause, now_ns),
-            HwError::Io(_) | HwError::TxFull { .. } => self.counters.io_errors += 1,
+            HwError::Io(errno) => {
+                self.counters.io_errors += 1;
+                self.counters.last_io_error = Some(errno);
+            }
+            HwError::TxFull { .. } => {
+                self.counters.io_errors += 1;
+                self.counters.last_io_error = None;
+            }
         }
     }
 

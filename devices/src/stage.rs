@@ -34,8 +34,30 @@ pub enum HwError {
     },
     /// The device vanished (unplugged adapter, closed pty, interface removed or down): the
     /// link closes it and reopens it with back-off.
-    #[error("device disconnected{}", .0.map(|e| format!(" ({})", e.desc())).unwrap_or_default())]
+    #[error("device disconnected{}", Cause(*.0))]
     Disconnected(Option<Errno>),
+}
+
+impl HwError {
+    /// The OS's error number of an I/O error from `std` or a crate over it. The transports'
+    /// errors all come from a failed system call (`io::Error::last_os_error`), which carries
+    /// its number and was built without allocating; EIO stands in for the impossible rest.
+    pub fn errno_of(e: &std::io::Error) -> Errno {
+        Errno::from_raw(e.raw_os_error().unwrap_or(libc::EIO))
+    }
+}
+
+/// " (reason)" after "device disconnected" when the OS gave one; written straight into the
+/// formatter, so showing the error allocates nothing either.
+struct Cause(Option<Errno>);
+
+impl std::fmt::Display for Cause {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.0 {
+            Some(e) => write!(f, " ({})", e.desc()),
+            None => Ok(()),
+        }
+    }
 }
 
 /// Counters a hardware keeps about what it absorbed without failing a call.

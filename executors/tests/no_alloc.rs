@@ -239,3 +239,157 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     assert_eq!(s.bus_outages, 1, "{s:?}");
     assert!(s.setpoints_refused >= 1, "{s:?}");
 }
+
+/// The descriptor of this process's UDP socket connected to `peer` (the executor's bus).
+fn udp_socket_connected_to(peer: std::net::SocketAddr) -> std::os::fd::RawFd {
+    let std::net::SocketAddr::V4(peer) = peer else {
+        panic!("an IPv4 peer");
+    };
+    for entry in std::fs::read_dir("/proc/self/fd").unwrap() {
+        let Ok(fd) = entry.unwrap().file_name().to_string_lossy().parse::<i32>() else {
+            continue;
+        };
+        // SAFETY: sockaddr_in is plain old data; all-zero is a valid value.
+        let mut addr: libc::sockaddr_in = unsafe { std::mem::zeroed() };
+        let mut len = std::mem::size_of::<libc::sockaddr_in>() as libc::socklen_t;
+        // SAFETY: getpeername writes at most `len` bytes to `addr`, which has that room; a
+        // descriptor that is not a connected socket gives an error, which we skip.
+        let r = unsafe {
+            libc::getpeername(fd, (&mut addr as *mut libc::sockaddr_in).cast(), &mut len)
+        };
+        if r == 0
+            && addr.sin_family == libc::AF_INET as libc::sa_family_t
+            && u16::from_be(addr.sin_port) == peer.port()
+            && u32::from_be(addr.sin_addr.s_addr) == u32::from(*peer.ip())
+        {
+            return fd;
+        }
+    }
+    panic!("no socket connected to {peer}");
+}
+
+/// A transport that fails on every tick allocates nothing either: a Dynamixel bus over UDP
+/// whose socket the OS stops sending on (shut for writing under the running executor, so every
+/// `send(2)` fails with `EPIPE`: an I/O error that does not take the bus down). 200 ticks of
+/// failed sends, requests that go unanswered, devices going stale, under the counting
+/// allocator.
+#[test]
+fn a_udp_bus_refusing_every_send_allocates_nothing() {
+    use conductor_devices::sim::dxl::DxlSimConfig;
+    use conductor_devices::sim::fault::FaultConfig;
+    use conductor_devices::sim::runner::{run_dxl, Endpoint};
+    use std::time::Duration;
+
+    let sim = run_dxl(
+        Endpoint::udp("127.0.0.1:0".parse().unwrap()).unwrap(),
+        DxlSimConfig {
+            ids: vec![1, 2],
+            ..DxlSimConfig::default()
+        },
+        FaultConfig::default(),
+        FaultConfig::default(),
+    );
+    let sim_addr: std::net::SocketAddr = sim.endpoint().parse().unwrap();
+    let mut text = format!(
+        "system = \"na\"\n[subsystems.arm]\nrate_hz = 200\n\
+         [subsystems.arm.hardware.net]\nkind = \"udp\"\nremote = \"{sim_addr}\"\nlocal = \"127.0.0.1:0\"\n\
+         [subsystems.arm.protocols.robotis]\nkind = \"dynamixel2\"\nhardware = \"net\"\ntimeout_us = 10000\n"
+    );
+    for i in 1..=2 {
+        text += &format!(
+            "[subsystems.arm.devices.j{i}]\nkind = \"dynamixel_x\"\nprotocol = \"robotis\"\nid = {i}\n\
+             [subsystems.arm.states.p{i}]\ndevice = \"j{i}\"\nchannel = \"position\"\nwritable = true\nmin = -1\nmax = 1\n"
+        );
+    }
+    let m = Manifest::parse(&text, "na.toml").unwrap_or_else(|e| panic!("{e}"));
+    let sub = m.subsystems[0].clone();
+
+    prepare_thread();
+    let (domain, _guard) = support::private_domain("noalloc-udp");
+    let bus = Bus::open(&domain, "executor/arm").unwrap();
+    let mut exec = Executor::new(&bus, &sub).unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = StateSubscriber::with_buffer(&bus, "arm/p1", 64).unwrap();
+    let mut stats = StatsSubscriber::new(&bus, "arm").ok();
+
+    let t0 = conductor_bus::monotonic_ns();
+    let mut k = 0u64;
+    let mut tick = |exec: &mut Executor| {
+        let due = t0 + k * 5_000_000;
+        let now = conductor_bus::monotonic_ns();
+        if due > now {
+            std::thread::sleep(Duration::from_nanos(due - now));
+        }
+        let now = conductor_bus::monotonic_ns();
+        let wake = Wake {
+            slot: k,
+            sched_ns: now,
+            late_ns: 0,
+            skipped: 0,
+        };
+        k += 1;
+        measured(|| exec.tick(&wake, now)).1
+    };
+    let flags = |sub: &mut StateSubscriber| {
+        let mut last = 0;
+        sub.drain(|s| last = s.status).unwrap();
+        last
+    };
+    // Warm-up: the servos answer over UDP and are brought up; every connection exists.
+    for _ in 0..100 {
+        tick(&mut exec);
+        ctl.add_ctrl("arm/p1", 0.2).unwrap();
+        ctl.send_ctrl().unwrap();
+    }
+    assert!(exec.stages().settled(), "brought up over UDP");
+    if stats.is_none() {
+        stats = StatsSubscriber::new(&bus, "arm").ok();
+    }
+    let up = flags(&mut p1);
+    assert_eq!(
+        up & conductor_bus::status::STALE,
+        0,
+        "fresh over UDP: {up:#x}"
+    );
+    // Let a stats publication through, to count errors from.
+    for _ in 0..25 {
+        tick(&mut exec);
+    }
+    let errors_before = stats
+        .as_mut()
+        .unwrap()
+        .latest()
+        .unwrap()
+        .unwrap()
+        .bus_errors;
+
+    // The OS stops sending on the executor's socket.
+    let fd = udp_socket_connected_to(sim_addr);
+    // SAFETY: shutdown(2) on a descriptor that stays open (the executor owns it); it changes no
+    // memory, only what the socket may do.
+    assert_eq!(unsafe { libc::shutdown(fd, libc::SHUT_WR) }, 0);
+    let mut allocations = 0;
+    for _ in 0..200 {
+        allocations += tick(&mut exec);
+        ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        ctl.send_ctrl().unwrap();
+    }
+    assert_eq!(
+        allocations, 0,
+        "failing sends allocated on the real-time thread"
+    );
+    // The failures really happened, and were I/O errors, not a vanished bus.
+    let down = flags(&mut p1);
+    assert!(
+        down & conductor_bus::status::STALE != 0,
+        "stale while no request goes out: {down:#x}"
+    );
+    let s = stats.unwrap().latest().unwrap().unwrap();
+    assert!(
+        s.bus_errors >= errors_before + 150,
+        "one failed send a tick: {} then {}",
+        errors_before,
+        s.bus_errors
+    );
+    assert_eq!(s.bus_outages, 0, "{s:?}");
+}

@@ -207,7 +207,7 @@ pub fn interface_up(name: &str) -> bool {
 /// deleted) or went down (`ENETDOWN`): a disconnection, reopened by the link; anything else is
 /// an I/O error. OS errors carry their number; io::Error builds no text for them.
 fn hw_error(e: io::Error) -> HwError {
-    let errno = Errno::from_raw(e.raw_os_error().unwrap_or(libc::EIO));
+    let errno = HwError::errno_of(&e);
     match errno {
         Errno::ENODEV | Errno::ENXIO | Errno::ENETDOWN => HwError::Disconnected(Some(errno)),
         _ => HwError::Io(errno),

@@ -52,11 +52,10 @@ impl UdpHardware {
     }
 }
 
+/// Every failure of a connected UDP socket is an I/O error: there is no device to vanish (a
+/// peer that went away is `ECONNREFUSED`, absorbed by the callers).
 fn hw_error(e: io::Error) -> HwError {
-    // OS errors carry their number; io::Error builds no text for them.
-    HwError::Io(nix::errno::Errno::from_raw(
-        e.raw_os_error().unwrap_or(libc::EIO),
-    ))
+    HwError::Io(HwError::errno_of(&e))
 }
 
 impl Hardware for UdpHardware {
@@ -166,5 +165,39 @@ mod tests {
         let k = hw.receive(&mut out, ctx).unwrap();
         got.extend_from_slice(&out[..k]);
         assert_eq!(got, [7]);
+    }
+
+    /// A socket the OS refuses to send on (shut for writing) reports the OS's own error number
+    /// as a typed value, every time; receiving still works.
+    #[test]
+    fn a_refused_send_is_a_typed_errno() {
+        use nix::errno::Errno;
+        use std::os::fd::AsRawFd;
+
+        let any: SocketAddr = "127.0.0.1:0".parse().unwrap();
+        let peer = UdpSocket::bind(any).unwrap();
+        let mut hw = UdpHardware::open(any, peer.local_addr().unwrap()).unwrap();
+        // SAFETY: shutdown(2) on a descriptor the socket owns; it changes no memory.
+        let r = unsafe { libc::shutdown(hw.socket.as_raw_fd(), libc::SHUT_WR) };
+        assert_eq!(r, 0);
+        let ctx = TickCtx { tick: 0, now_ns: 0 };
+        for _ in 0..3 {
+            assert_eq!(hw.transmit(&[1, 2, 3], ctx), Err(HwError::Io(Errno::EPIPE)));
+        }
+        assert_eq!(
+            HwError::Io(Errno::EPIPE).to_string(),
+            "I/O error: EPIPE: Broken pipe"
+        );
+        peer.send_to(&[9], hw.local_addr().unwrap()).unwrap();
+        let mut out = [0u8; 4];
+        let mut got = 0;
+        for _ in 0..1000 {
+            got = hw.receive(&mut out, ctx).unwrap();
+            if got > 0 {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        assert_eq!(&out[..got], &[9]);
     }
 }

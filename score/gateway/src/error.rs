@@ -1,28 +1,43 @@
 //! What can go wrong.
 
+use std::path::PathBuf;
+
+use conductor_protocols::score_link::FrameError;
+
+use crate::link::Answer;
+
 /// Gateway failures. `Disconnected` and `Timeout` lead to a reconnect; the others are reported.
 #[derive(Debug, thiserror::Error)]
 pub enum GatewayError {
     /// The serial device could not be opened.
-    #[error("cannot open {path}: {error}")]
+    #[error("cannot open {}: {source}", path.display())]
     Open {
         /// Device path.
-        path: String,
-        /// Why.
-        error: String,
+        path: PathBuf,
+        /// Why, as `serialport` tells it.
+        #[source]
+        source: serialport::Error,
     },
-    /// The device went away (unplugged, emulator ended).
-    #[error("link lost: {0}")]
-    Disconnected(String),
+    /// The device went away (unplugged, emulator ended): end of file, or the OS's error.
+    #[error("link lost: {}", lost(.0))]
+    Disconnected(#[source] Option<std::io::Error>),
     /// Other I/O error.
     #[error("I/O: {0}")]
     Io(#[from] std::io::Error),
     /// No answer in time.
     #[error("no answer from the board to {0}")]
     Timeout(String),
-    /// The board speaks another protocol version or sent nonsense.
+    /// A request could not be framed (a string over its limit).
     #[error("protocol: {0}")]
-    Protocol(String),
+    Frame(#[from] FrameError),
+    /// The board answered a request with something else.
+    #[error("protocol: {request}: unexpected {answer:?}")]
+    Unexpected {
+        /// The request, by name.
+        request: &'static str,
+        /// What came back instead.
+        answer: Box<Answer>,
+    },
     /// The board refused a request.
     #[error("board refused: {message}")]
     Board {
@@ -46,5 +61,13 @@ impl GatewayError {
                 | GatewayError::Io(_)
                 | GatewayError::Open { .. }
         )
+    }
+}
+
+/// "end of file", or the OS's error.
+fn lost(e: &Option<std::io::Error>) -> &dyn std::fmt::Display {
+    match e {
+        Some(e) => e,
+        None => &"end of file",
     }
 }

@@ -194,14 +194,19 @@ impl Gateway {
     }
 
     fn handshake(&mut self, link: &mut Link) -> Result<(), GatewayError> {
-        let Answer::Hello {
-            board,
-            firmware,
-            number_type,
-            ..
-        } = link.request(Request::Hello)?
-        else {
-            return Err(GatewayError::Protocol("hello: unexpected answer".into()));
+        let (board, firmware, number_type) = match link.request(Request::Hello)? {
+            Answer::Hello {
+                board,
+                firmware,
+                number_type,
+                ..
+            } => (board, firmware, number_type),
+            other => {
+                return Err(GatewayError::Unexpected {
+                    request: "hello",
+                    answer: Box::new(other),
+                })
+            }
         };
         let subsystem = self
             .subsystem
@@ -238,18 +243,20 @@ impl Gateway {
     fn list(link: &mut Link) -> Result<(Vec<BoardVar>, u32), GatewayError> {
         match link.request(Request::ListVars)? {
             Answer::Vars(v, g) => Ok((v, g)),
-            other => Err(GatewayError::Protocol(format!(
-                "list: unexpected {other:?}"
-            ))),
+            other => Err(GatewayError::Unexpected {
+                request: "list",
+                answer: Box::new(other),
+            }),
         }
     }
 
     fn exec(link: &mut Link, line: &str) -> Result<(String, bool), GatewayError> {
         match link.request(Request::Exec { line })? {
             Answer::Exec(text, ok, _) => Ok((text, ok)),
-            other => Err(GatewayError::Protocol(format!(
-                "exec: unexpected {other:?}"
-            ))),
+            other => Err(GatewayError::Unexpected {
+                request: "exec",
+                answer: Box::new(other),
+            }),
         }
     }
 

@@ -96,9 +96,9 @@ impl Link {
         let port = serialport::new(path.to_string_lossy(), 115_200)
             .timeout(Duration::from_millis(5))
             .open_native()
-            .map_err(|e| GatewayError::Open {
-                path: path.display().to_string(),
-                error: e.to_string(),
+            .map_err(|source| GatewayError::Open {
+                path: path.to_path_buf(),
+                source,
             })?;
         // Sequence numbers start somewhere new each time, so a late reply to a previous host
         // (or a previous connection) cannot be taken for an answer.
@@ -136,11 +136,11 @@ impl Link {
     ) -> Result<(), GatewayError> {
         let mut buf = [0u8; 4096];
         let n = match self.port.read(&mut buf) {
-            Ok(0) => return Err(GatewayError::Disconnected("end of file".into())),
+            Ok(0) => return Err(GatewayError::Disconnected(None)),
             Ok(n) => n,
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => return Ok(()),
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => return Ok(()),
-            Err(e) => return Err(GatewayError::Disconnected(e.to_string())),
+            Err(e) => return Err(GatewayError::Disconnected(Some(e))),
         };
         let events = &mut self.events;
         self.scanner.feed(&buf[..n], |m| match decode_reply(m) {
@@ -165,8 +165,7 @@ impl Link {
         self.seq = self.seq.wrapping_add(1).max(1);
         let seq = self.seq;
         let mut frame = [0u8; MAX_FRAME];
-        let n = encode_request(seq, &req, &mut frame)
-            .map_err(|e| GatewayError::Protocol(e.to_string()))?;
+        let n = encode_request(seq, &req, &mut frame)?;
         let repeatable = !matches!(req, Request::Exec { .. });
         let end = Instant::now() + REPLY_TIMEOUT;
         let mut vars = Vec::new();
@@ -186,7 +185,7 @@ impl Link {
                 self.port
                     .write_all(&frame[..n])
                     .and_then(|_| self.port.flush())
-                    .map_err(|e| GatewayError::Disconnected(e.to_string()))?;
+                    .map_err(|e| GatewayError::Disconnected(Some(e)))?;
                 sent = Some(Instant::now());
             }
             self.read_into(&mut |s, r| {

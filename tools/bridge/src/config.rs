@@ -222,7 +222,7 @@ impl BridgeConfig {
             }
         }
         if self.export.is_none() && self.import.is_empty() {
-            return bad("nothing to do: give [export] and/or [[import]]".into());
+            return Err(BridgeError::NothingToDo);
         }
         Ok(())
     }

@@ -231,13 +231,13 @@ pub fn run(
 }
 
 fn spawn(
-    name: &str,
+    name: &'static str,
     f: impl FnOnce() -> Result<()> + Send + 'static,
 ) -> Result<std::thread::JoinHandle<Result<()>>> {
     std::thread::Builder::new()
         .name(name.into())
         .spawn(f)
-        .map_err(|e| BridgeError::Thread(format!("starting {name}: {e}")))
+        .map_err(|source| BridgeError::Spawn { name, source })
 }
 
 /// The Zenoh crate the bridge is built on (for tools and tests that talk to the key space).

@@ -63,9 +63,7 @@ pub fn config(args: &BridgeArgs) -> Result<BridgeConfig> {
 // A bridge.toml may be incomplete until the flags are added: checked after merging.
 fn toml_config(text: &str) -> conductor_bridge::Result<BridgeConfig> {
     match BridgeConfig::from_toml(text) {
-        Err(conductor_bridge::BridgeError::Config(m)) if m.starts_with("nothing to do") => {
-            Ok(BridgeConfig::default())
-        }
+        Err(conductor_bridge::BridgeError::NothingToDo) => Ok(BridgeConfig::default()),
         other => other,
     }
 }

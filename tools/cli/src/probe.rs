@@ -29,16 +29,13 @@ impl Probe {
     pub fn new(domain: &Domain) -> Result<Self> {
         let name = "conductor-cli/probe"
             .try_into()
-            .map_err(|e| BusError::Iceoryx {
-                context: "node name".into(),
-                detail: format!("{e:?}"),
-            })?;
+            .map_err(|e| BusError::iceoryx("node name", e))?;
         domain.prepare_dirs()?;
         let node = NodeBuilder::new()
             .name(&name)
             .config(domain.iceoryx2_config())
             .create::<RtIpc>()
-            .map_err(|e| iox("joining the domain", e))?;
+            .map_err(|e| BusError::iceoryx("joining the domain", e))?;
         Ok(Self {
             node,
             domain: domain.clone(),
@@ -51,18 +48,18 @@ impl Probe {
         let sname = name
             .as_str()
             .try_into()
-            .map_err(|e| iox("service name", e))?;
+            .map_err(|e| BusError::iceoryx("service name", e))?;
         let service = self
             .node
             .service_builder(&sname)
             .publish_subscribe::<StateSample>()
             .open()
-            .map_err(|e| iox(format!("opening {name:?}"), e))?;
+            .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
         let sub = service
             .subscriber_builder()
             .buffer_size(1)
             .create()
-            .map_err(|e| iox(format!("subscribing to {name:?}"), e))?;
+            .map_err(|e| BusError::iceoryx(format!("subscribing to {name:?}"), e))?;
         Ok(Probed {
             service,
             sub,
@@ -81,7 +78,7 @@ impl Probe {
             }
             CallbackProgression::Continue
         })
-        .map_err(|e| iox("listing nodes", e))?;
+        .map_err(|e| BusError::iceoryx("listing nodes", e))?;
         Ok(out)
     }
 }
@@ -93,7 +90,7 @@ impl Probed {
             match self.sub.receive() {
                 Ok(Some(s)) => self.latest = Some(*s),
                 Ok(None) => return Ok(self.latest.is_some()),
-                Err(e) => return Err(iox("receiving", e).into()),
+                Err(e) => return Err(BusError::iceoryx("receiving", e).into()),
             }
         }
     }
@@ -118,12 +115,5 @@ impl Probed {
                     .map_or_else(|| format!("node {id}"), |(_, name)| name.clone())
             })
             .collect()
-    }
-}
-
-fn iox(context: impl Into<String>, e: impl core::fmt::Debug) -> BusError {
-    BusError::Iceoryx {
-        context: context.into(),
-        detail: format!("{e:?}"),
     }
 }
