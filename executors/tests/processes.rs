@@ -1,6 +1,7 @@
 //! The launcher and the executors as real processes, each test in its own bus domain: rates seen
 //! by an external subscriber process, a frame applied in one tick, restart after SIGKILL,
-//! orderly SIGTERM leaving nothing behind, the command watchdog, and launches that must fail.
+//! orderly SIGTERM leaving nothing behind, the command watchdog, launches that must fail, and
+//! restarted executors that inherit no descriptor of the launcher.
 //!
 //! Rates are modest (≤ 250 Hz) and sleep-based: the test machine has 2 CPUs.
 
@@ -386,4 +387,70 @@ fn launches_that_cannot_run_fail_with_the_reason() {
     first.wait().unwrap();
     let _ = std::fs::remove_file(bad);
     let _ = std::fs::remove_file(rt);
+}
+
+/// The descriptors of process `pid`, each with what it points at.
+fn descriptors(pid: u32) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .unwrap()
+        .map_while(Result::ok)
+        .map(|e| {
+            let target = std::fs::read_link(e.path()).unwrap_or_default();
+            format!(
+                "{} -> {}",
+                e.file_name().to_string_lossy(),
+                target.display()
+            )
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+/// An executor restarted after SIGKILL holds as many descriptors at READY as the first did: the
+/// launcher's own (its bus node, opened after the first start) are not inherited.
+#[test]
+fn a_restarted_executor_starts_with_the_descriptors_of_the_first() {
+    // The launcher as its own process: its children can only inherit the launcher's descriptors.
+    let (d, _guard) = private_domain("fds");
+    let mut launcher = Command::new(LAUNCHER)
+        .arg(test_manifest("two-subsystems.toml"))
+        .args(["--domain", d.name(), "--only", "sensors", "--no-rt"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(launcher.stderr.take().unwrap()).lines();
+    let mut next_ready = || loop {
+        let line = lines.next().expect("launcher output").unwrap();
+        if let Some(rest) = line.split("ready (pid ").nth(1) {
+            return rest.trim_end_matches(')').parse::<u32>().unwrap();
+        }
+    };
+    let mut counts = Vec::new();
+    let mut first = Vec::new();
+    for round in 0..5 {
+        let pid = next_ready();
+        let fds = descriptors(pid);
+        counts.push(fds.len());
+        if round == 0 {
+            first = fds.clone();
+        }
+        assert_eq!(
+            fds.len(),
+            first.len(),
+            "executor {round} (pid {pid}) starts with other descriptors than the first: \
+             {fds:#?}\nthe first had {first:#?}"
+        );
+        kill(Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
+    }
+    let pid = next_ready();
+    kill(Pid::from_raw(launcher.id() as i32), Signal::SIGTERM).unwrap();
+    let status = launcher.wait().unwrap();
+    assert!(status.success(), "launcher: {status}");
+    assert!(
+        counts.iter().all(|&c| c == counts[0]),
+        "{counts:?} (last pid {pid})"
+    );
 }

@@ -87,7 +87,9 @@ pub(super) fn view_args(v: &ViewDef, domain: &str) -> Vec<OsString> {
     a
 }
 
-struct ChildRt {
+/// One supervised process (an executor, a gateway or the view) across its restarts: what it runs,
+/// its current process and phase, its crash history and its output's last lines.
+struct Supervised {
     subsystem: String,
     role: Role,
     proc: Option<Child>,
@@ -106,7 +108,7 @@ struct ChildRt {
     failed: Option<String>,
 }
 
-impl ChildRt {
+impl Supervised {
     /// Waits (briefly) until everything the exited process wrote has been forwarded.
     fn drain_output(&mut self) {
         if let Some(t) = self.output.take() {
@@ -127,7 +129,7 @@ pub(super) struct Supervisor {
     domain: Domain,
     stop: Stop,
     info: Arc<Mutex<Vec<ExecutorInfo>>>,
-    children: Vec<ChildRt>,
+    children: Vec<Supervised>,
     events: (Sender<Event>, Receiver<Event>),
 }
 
@@ -194,6 +196,48 @@ fn executor_ready(line: &str) -> Option<String> {
     (line.trim() == READY).then(String::new)
 }
 
+/// In a forked child before `exec`: marks every descriptor above stderr close-on-exec, so the
+/// program inherits only stdin, stdout and stderr. The launcher's process holds descriptors that
+/// were opened without `O_CLOEXEC` (iceoryx2's node and port files of the launcher's own bus, and
+/// in a program that launches in-process, whatever that program has open); without this, each
+/// executor started after them would carry them for its whole life. Marked rather than closed:
+/// std reports a failed `exec` through a close-on-exec pipe of its own.
+///
+/// Only async-signal-safe system calls (close_range(2), else fcntl(2) on each descriptor).
+fn inherit_only_stdio() {
+    // SAFETY: close_range(2) takes three integers and touches no memory of this process.
+    let marked = unsafe {
+        libc::syscall(
+            libc::SYS_close_range,
+            3 as libc::c_uint,
+            libc::c_uint::MAX,
+            libc::CLOSE_RANGE_CLOEXEC,
+        )
+    } == 0;
+    if marked {
+        return;
+    }
+    // Kernels before 5.11 lack CLOSE_RANGE_CLOEXEC: every possible descriptor, one by one.
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit(2) writes the struct it is given, which lives on this stack.
+    let max = if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) } == 0 {
+        limit.rlim_cur.min(1 << 20) as libc::c_int
+    } else {
+        1024
+    };
+    for fd in 3..max {
+        // SAFETY: fcntl(2) on a descriptor number; one that is not open fails with EBADF.
+        let flags = unsafe { libc::fcntl(fd, libc::F_GETFD) };
+        if flags >= 0 && flags & libc::FD_CLOEXEC == 0 {
+            // SAFETY: as above, on a descriptor that is open.
+            unsafe { libc::fcntl(fd, libc::F_SETFD, flags | libc::FD_CLOEXEC) };
+        }
+    }
+}
+
 fn describe(status: &ExitStatus) -> String {
     match (status.code(), status.signal()) {
         (Some(c), _) => format!("exit status {c}"),
@@ -241,7 +285,7 @@ impl Supervisor {
             )
             .chain(view.map(|v| ("view".to_string(), Role::View(v))));
         for (s, role) in roles {
-            self.children.push(ChildRt {
+            self.children.push(Supervised {
                 subsystem: s,
                 role,
                 proc: None,
@@ -314,7 +358,7 @@ impl Supervisor {
             .process_group(0);
         let gateway = c.role.auxiliary();
         // SAFETY: the closure runs in the forked child before exec and only makes the
-        // async-signal-safe sigprocmask(2) and prctl(2) system calls.
+        // async-signal-safe sigprocmask(2), close_range(2)/fcntl(2) and prctl(2) system calls.
         unsafe {
             cmd.pre_exec(move || {
                 if gateway {
@@ -329,6 +373,7 @@ impl Supervisor {
                     )
                     .map_err(std::io::Error::from)?;
                 }
+                inherit_only_stdio();
                 // The child stops (orderly) if the launcher dies.
                 nix::sys::prctl::set_pdeathsig(Signal::SIGTERM).map_err(std::io::Error::from)
             });
@@ -831,7 +876,7 @@ impl Supervisor {
 }
 
 /// A gateway's summary line: its board, what it publishes, restarts, and what it is doing.
-fn gateway_summary(c: &ChildRt, g: &GatewayDef) -> String {
+fn gateway_summary(c: &Supervised, g: &GatewayDef) -> String {
     let state = match (&c.phase, &c.failed) {
         (_, Some(why)) => format!(" (given up: {why})"),
         (Phase::Running { .. }, _) => String::new(),
@@ -854,7 +899,7 @@ fn gateway_summary(c: &ChildRt, g: &GatewayDef) -> String {
 }
 
 /// The view's summary line: where it listens, restarts, and what it is doing.
-fn view_summary(c: &ChildRt, v: &ViewDef) -> String {
+fn view_summary(c: &Supervised, v: &ViewDef) -> String {
     let state = match (&c.phase, &c.failed) {
         (_, Some(why)) => format!(" (given up: {why})"),
         (Phase::Running { .. }, _) => String::new(),
