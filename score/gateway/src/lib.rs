@@ -10,10 +10,10 @@
 //! restores the board's configuration if it came back empty ([`gateway`]).
 
 pub mod cli;
+pub mod client;
 pub mod clock;
 pub mod error;
 pub mod gateway;
-pub mod link;
 
 pub use cli::main_with_args;
 pub use error::GatewayError;
