@@ -1,10 +1,9 @@
 //! # conductor-executor
 //!
-//! What the user runs: a **manifest** describes the robot; one **executor** process per
+//! What the user runs: a **manifest** (the `conductor-manifest` crate) describes the robot; one **executor** process per
 //! subsystem keeps every State current at its rate on a real-time thread; the **launcher**
 //! validates the manifest, starts and supervises the executors.
 //!
-//! * [`manifest`] — the TOML model and its validator (every error with its location).
 //! * [`stages`] — the tick scheduler over the `conductor-devices` stage traits.
 //! * [`executor`] — the stages on the bus, and the absolute-deadline loop.
 //! * [`events`] — the log of the hardware edge, fed from the real-time thread without blocking.
@@ -35,7 +34,6 @@ pub mod demo;
 pub mod events;
 pub mod executor;
 pub mod launcher;
-pub mod manifest;
 pub mod process;
 pub mod rt;
 pub mod schedule;

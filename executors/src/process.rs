@@ -24,9 +24,9 @@ use clap::Parser;
 use conductor_bus::{prepare_thread, Bus, Domain};
 
 use crate::executor::{run_from, Executor, StopReport};
-use crate::manifest::Manifest;
 use crate::rt::{self, RtRequest};
 use crate::signals::{self, Stop};
+use conductor_manifest::Manifest;
 
 /// Exit status of an orderly stop.
 pub const EXIT_OK: u8 = 0;

@@ -42,7 +42,7 @@ use conductor_devices::{
     LinkState, Phase, Reply, Request, SafeAction, SafeProgress, Startup, TickCtx, Update,
 };
 
-use crate::manifest::{Calibration, SafeSpec, Subsystem};
+use conductor_manifest::{Calibration, SafeSpec, Subsystem};
 
 /// A value ready to publish for one state.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -26,9 +26,11 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crate::cleanup::{executor_node_name, gateway_node_name, scan_and_clean};
-use crate::manifest::{GatewayDef, GatewayKind, Manifest, ManifestError, ViewDef, BRIDGE_NAME};
 use crate::process::resolve_domain;
 use crate::signals::{self, Stop};
+use conductor_manifest::{
+    GatewayDef, GatewayKind, GatewayOptions, Manifest, ManifestError, ViewDef, BRIDGE_NAME,
+};
 use supervisor::Supervisor;
 
 /// How to launch.
@@ -372,11 +374,10 @@ impl Launch {
                 port: manifest_path
                     .canonicalize()
                     .unwrap_or_else(|_| manifest_path.to_path_buf()),
-                max_rate_hz: None,
-                lazy_rate_hz: None,
-                restore: false,
-                retry_ms: None,
-                watchdog_ms: None,
+                options: GatewayOptions {
+                    restore: false,
+                    ..GatewayOptions::default()
+                },
             });
         }
 

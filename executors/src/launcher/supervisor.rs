@@ -19,9 +19,9 @@ use nix::unistd::Pid;
 
 use super::{ExecutorInfo, LaunchError, LaunchOptions, LaunchReport, ProcessKind, SubsystemReport};
 use crate::cleanup::scan_and_clean;
-use crate::manifest::{GatewayDef, GatewayKind, ViewDef};
 use crate::process::{EXIT_CONFIG, EXIT_NO_RT, READY};
 use crate::signals::Stop;
+use conductor_manifest::{GatewayDef, GatewayKind, ScoreGatewayArgs, ViewDef};
 
 enum EventKind {
     /// The process reported ready; for a gateway, what its ready line said after its name.
@@ -141,32 +141,7 @@ const STABLE: Duration = Duration::from_secs(30);
 /// The arguments of a gateway process (after [`LaunchOptions::gateway_args`]).
 pub(super) fn gateway_args(g: &GatewayDef, domain: &str) -> Vec<OsString> {
     match g.kind {
-        GatewayKind::Score => {
-            let mut a: Vec<OsString> = vec![
-                "--port".into(),
-                g.port.clone().into(),
-                "--subsystem".into(),
-                g.name.clone().into(),
-                "--domain".into(),
-                domain.into(),
-            ];
-            if let Some(r) = g.max_rate_hz {
-                a.extend(["--max-rate".into(), r.to_string().into()]);
-            }
-            if let Some(r) = g.lazy_rate_hz {
-                a.extend(["--lazy-rate".into(), r.to_string().into()]);
-            }
-            if !g.restore {
-                a.push("--no-restore".into());
-            }
-            if let Some(ms) = g.retry_ms {
-                a.extend(["--retry-ms".into(), ms.to_string().into()]);
-            }
-            if let Some(ms) = g.watchdog_ms {
-                a.extend(["--watchdog-ms".into(), ms.to_string().into()]);
-            }
-            a
-        }
+        GatewayKind::Score => ScoreGatewayArgs::for_gateway(g, domain).to_args(),
         GatewayKind::Bridge => vec![
             "--manifest".into(),
             g.port.clone().into(),
@@ -921,17 +896,14 @@ fn view_summary(c: &Supervised, v: &ViewDef) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use conductor_manifest::GatewayOptions;
 
     fn def() -> GatewayDef {
         GatewayDef {
             name: "board".into(),
             kind: GatewayKind::Score,
             port: "/dev/score-link".into(),
-            max_rate_hz: None,
-            lazy_rate_hz: None,
-            restore: true,
-            retry_ms: None,
-            watchdog_ms: None,
+            options: GatewayOptions::default(),
         }
     }
 
@@ -953,11 +925,13 @@ mod tests {
             ]
         );
         let g = GatewayDef {
-            max_rate_hz: Some(500.0),
-            lazy_rate_hz: Some(2.5),
-            restore: false,
-            retry_ms: Some(50),
-            watchdog_ms: Some(250),
+            options: GatewayOptions {
+                max_rate_hz: Some(500.0),
+                lazy_rate_hz: Some(2.5),
+                restore: false,
+                retry_ms: Some(50),
+                watchdog_ms: Some(250),
+            },
             ..def()
         };
         assert_eq!(

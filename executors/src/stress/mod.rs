@@ -105,7 +105,7 @@ pub fn manifest(cfg: &StressConfig) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::manifest::Manifest;
+    use conductor_manifest::Manifest;
 
     #[test]
     fn stress_manifests_validate() {
