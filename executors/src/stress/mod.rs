@@ -14,6 +14,7 @@
 mod logger;
 mod probe;
 mod run;
+#[cfg(feature = "cli")]
 pub mod tool;
 
 pub use logger::{parse_line, Logger, StateReport, Summary};
