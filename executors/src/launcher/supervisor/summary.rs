@@ -122,15 +122,21 @@ impl Supervisor {
     }
 }
 
-/// A gateway's summary line: its board, what it publishes, restarts, and what it is doing.
-fn gateway_summary(c: &Supervised, g: &GatewayDef) -> String {
-    let state = match (&c.phase, &c.failed) {
+/// What an auxiliary process (a gateway, the view) is doing, for its summary line; `starting`
+/// says what a started one that is not ready yet is doing.
+fn auxiliary_state(c: &Supervised, starting: &str) -> String {
+    match (&c.phase, &c.failed) {
         (_, Some(why)) => format!(" (given up: {why})"),
         (Phase::Running { .. }, _) => String::new(),
-        (Phase::Starting { .. }, _) => " (waiting for its board)".into(),
+        (Phase::Starting { .. }, _) => format!(" ({starting})"),
         (Phase::Waiting { .. }, _) => " (restarting)".into(),
         (Phase::Stopped, _) => " (stopped)".into(),
-    };
+    }
+}
+
+/// A gateway's summary line: its board, what it publishes, restarts, and what it is doing.
+fn gateway_summary(c: &Supervised, g: &GatewayDef) -> String {
+    let state = auxiliary_state(c, "waiting for its board");
     let what = if c.ready_text.is_empty() {
         String::new()
     } else {
@@ -147,13 +153,7 @@ fn gateway_summary(c: &Supervised, g: &GatewayDef) -> String {
 
 /// The view's summary line: where it listens, restarts, and what it is doing.
 fn view_summary(c: &Supervised, v: &ViewDef) -> String {
-    let state = match (&c.phase, &c.failed) {
-        (_, Some(why)) => format!(" (given up: {why})"),
-        (Phase::Running { .. }, _) => String::new(),
-        (Phase::Starting { .. }, _) => " (starting)".into(),
-        (Phase::Waiting { .. }, _) => " (restarting)".into(),
-        (Phase::Stopped, _) => " (stopped)".into(),
-    };
+    let state = auxiliary_state(c, "starting");
     let url = if c.ready_text.is_empty() {
         format!("ws://{}", v.listen)
     } else {
