@@ -11,7 +11,6 @@
 //! * [`process`] — the `conductor-executor` program.
 //! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
 //! * [`stress`] — the thesis' stress test (sine states and an external logger).
-//! * [`demo`] — the mini-Hubo demo's gait and PID (the `conductor-demo` program).
 //! * [`soak`] — the fault campaign on the simulated robots of deploy/ (`conductor-soak`).
 //! * [`cleanup`] — the domain's iceoryx2 nodes, and removing what dead ones left behind.
 //!
@@ -30,7 +29,6 @@ macro_rules! note {
 }
 
 pub mod cleanup;
-pub mod demo;
 pub mod events;
 pub mod executor;
 pub mod launcher;
