@@ -5,7 +5,6 @@ use std::process::Command;
 
 use conductor_bus::{Domain, RtIpc};
 use conductor_examples::minihubo::{error_ratio, gait_rms, GAINS};
-use conductor_executor::stress::parse_line;
 use iceoryx2::testing::remove_global_mgmt_segment;
 
 #[test]
@@ -27,7 +26,10 @@ fn the_leg_tracks_the_gait_and_the_pid_beats_the_open_loop_as_predicted() {
         .lines()
         .find(|l| l.starts_with("summary:"))
         .unwrap_or_else(|| panic!("no summary in {stdout}"));
-    let kv = parse_line(summary);
+    let kv: std::collections::HashMap<&str, &str> = summary
+        .split_whitespace()
+        .filter_map(|kv| kv.split_once('='))
+        .collect();
     let get = |k: &str| kv[k].parse::<f64>().unwrap();
     let (open, pid) = (get("open_loop_rms"), get("pid_rms"));
     // Linear theory for the servo lag (τ = 50 ms) behind a pure delay d: the error can only grow

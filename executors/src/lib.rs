@@ -10,7 +10,6 @@
 //! * [`schedule`], [`rt`], [`signals`] — deadlines, real-time set-up, stop requests.
 //! * [`process`] — the `conductor-executor` program.
 //! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
-//! * [`stress`] — the thesis' stress test (sine states and an external logger).
 //! * [`soak`] — the fault campaign on the simulated robots of deploy/ (`conductor-soak`).
 //! * [`cleanup`] — the domain's iceoryx2 nodes, and removing what dead ones left behind.
 //!
@@ -38,4 +37,3 @@ pub mod schedule;
 pub mod signals;
 pub mod soak;
 pub mod stages;
-pub mod stress;

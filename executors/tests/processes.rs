@@ -1,79 +1,22 @@
-//! The launcher and the executors as real processes, each test in its own bus domain: rates seen
-//! by an external subscriber process, a frame applied in one tick, restart after SIGKILL,
-//! orderly SIGTERM leaving nothing behind, the command watchdog, launches that must fail, and
-//! restarted executors that inherit no descriptor of the launcher.
+//! The launcher and the executors as real processes, each test in its own bus domain: a frame
+//! applied in one tick, restart after SIGKILL, orderly SIGTERM leaving nothing behind, the
+//! command watchdog, launches that must fail, and restarted executors that inherit no descriptor
+//! of the launcher. (Rates seen by an external subscriber process: benches/tests/stress_logger.rs,
+//! beside the stress tool's logger.)
 //!
 //! Rates are modest (≤ 250 Hz) and sleep-based: the test machine has 2 CPUs.
 
 mod support;
 
-use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Controller, StatsSubscriber};
 use conductor_executor::launcher::{Launch, LaunchError};
-use conductor_executor::stress::parse_line;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use support::*;
-
-/// Deadline misses of a subsystem so far, from its stats.
-fn misses(bus: &Bus, subsystem: &str) -> u64 {
-    let mut s = StatsSubscriber::new(bus, subsystem).unwrap();
-    eventually(5, "stats", || s.latest().unwrap()).misses
-}
-
-#[test]
-fn an_external_subscriber_sees_every_state_at_its_rate() {
-    let (d, _guard) = private_domain("rates");
-    let launch = Launch::start(&test_manifest("two-subsystems.toml"), options(&d)).unwrap();
-    let states = [
-        "arm/j0",
-        "arm/j1",
-        "arm/j2",
-        "arm/j3",
-        "arm/j4",
-        "arm/j5",
-        "sensors/a",
-        "sensors/b",
-        "sensors/c",
-    ];
-    let out = Command::new(STRESS)
-        .args(["log", "--domain", d.name(), "--seconds", "2", "--states"])
-        .arg(states.join(","))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let bus = Bus::open(&d, "test").unwrap();
-    let skipped = misses(&bus, "arm") + misses(&bus, "sensors");
-    let text = String::from_utf8(out.stdout).unwrap();
-    let rows: Vec<HashMap<String, String>> = text.lines().map(parse_line).collect();
-    assert_eq!(rows.len(), states.len(), "{text}");
-    let expected_rates = [200.0, 200.0, 200.0, 200.0, 200.0, 200.0, 250.0, 125.0, 50.0];
-    for (row, (name, rate)) in rows.iter().zip(states.iter().zip(expected_rates)) {
-        assert_eq!(row["state"], *name);
-        assert_eq!(row["rate_hz"].parse::<f64>().unwrap(), rate, "{name}");
-        assert_eq!(row["missed"], "0", "{name}: the subscriber lost samples");
-        // Samples are counted by their sample time over a 2 s window: one per period, ±1 for
-        // where the window's edges fall. A deadline the executor missed (its slot skipped,
-        // reported in its stats) publishes nothing, so it may lower the count.
-        let count: f64 = row["count"].parse().unwrap();
-        let want = rate * 2.0;
-        assert!(
-            count <= want + 1.0 && count >= want - 1.0 - skipped as f64,
-            "{name}: {count} samples in 2 s at {rate} Hz ({skipped} deadline misses): {text}"
-        );
-    }
-    drop(bus);
-    launch.stop();
-    launch.wait().unwrap();
-}
 
 #[test]
 fn a_frame_of_six_setpoints_is_applied_in_one_tick() {
