@@ -80,8 +80,11 @@ pub struct ScoreGatewayArgs {
     /// The board's link port (its second USB serial port, e.g. /dev/score-link or /dev/ttyACM1).
     #[cfg_attr(feature = "clap", arg(long))]
     pub port: PathBuf,
-    /// Subsystem name (default: score-<board name>).
-    #[cfg_attr(feature = "clap", arg(long))]
+    /// Subsystem name (default: `score-<board name>`).
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, help = "Subsystem name (default: score-<board name>)")
+    )]
     pub subsystem: Option<String>,
     /// Domain (default: $CONDUCTOR_DOMAIN, else "default").
     #[cfg_attr(feature = "clap", arg(long))]
