@@ -8,9 +8,13 @@
 //!   over the Conductor bus; used by the `bus_latency` criterion bench and by the suite.
 //! * [`suite`] — the thesis' stress test at 50 Hz – 10 kHz beside cyclictest and the IPC floor,
 //!   with a Markdown/JSON report and plots (`conductor bench`).
+//! * [`stress`] — the thesis' stress test itself: sine states launched through
+//!   `conductor_executor::launcher`, the external logger and the command probe (the
+//!   `conductor-stress` program; its command line is the `cli` feature).
 
 pub mod percentiles;
 pub mod pingpong;
+pub mod stress;
 pub mod suite;
 
 pub use percentiles::Percentiles;

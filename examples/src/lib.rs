@@ -8,11 +8,14 @@
 //! * `python/controller.py` — the `conductor` Python package (`python/`, over the official
 //!   iceoryx2 package);
 //! * `python/udp_client.py` — a MATLAB-style client of `conductor udp-gateway`;
-//! * `sim-motor` — a first-order motor owned by a simulated executor ([`sim`], [`motor`]).
+//! * `sim-motor` — a first-order motor owned by a simulated executor ([`sim`], [`motor`]);
+//! * `conductor-demo` — the simulated mini-Hubo right leg launched from its manifest and walking
+//!   under the thesis' PID ([`minihubo`]: its gait and the linear theory it is checked against).
 //!
 //! See `examples/README.md` for how to run each.
 
 #![warn(missing_docs)]
 
+pub mod minihubo;
 pub mod motor;
 pub mod sim;

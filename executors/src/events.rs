@@ -12,8 +12,8 @@ use std::time::{Duration, Instant};
 use conductor_devices::device::{AX_MODELS, MX_MODELS, X_MODELS};
 use conductor_devices::{ControllerState, Failure, Phase};
 
-use crate::manifest::Subsystem;
 use crate::stages::{Event, TripCause};
+use conductor_manifest::Subsystem;
 
 /// Most lines written per second.
 pub const LINES_PER_S: u32 = 20;

@@ -11,10 +11,10 @@ use conductor_devices::kinds::BuildError;
 use conductor_devices::TickCtx;
 
 use crate::events::{EventLog, Names};
-use crate::manifest::Subsystem;
 use crate::rt::RtStatus;
 use crate::schedule::{sleep_until, Schedule, Wake};
 use crate::stages::{Stages, Unconfirmed};
+use conductor_manifest::Subsystem;
 
 /// Stats are published about this often.
 pub const STATS_INTERVAL_NS: u64 = 100_000_000;

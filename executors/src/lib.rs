@@ -1,18 +1,15 @@
 //! # conductor-executor
 //!
-//! What the user runs: a **manifest** describes the robot; one **executor** process per
+//! What the user runs: a **manifest** (the `conductor-manifest` crate) describes the robot; one **executor** process per
 //! subsystem keeps every State current at its rate on a real-time thread; the **launcher**
 //! validates the manifest, starts and supervises the executors.
 //!
-//! * [`manifest`] — the TOML model and its validator (every error with its location).
 //! * [`stages`] — the tick scheduler over the `conductor-devices` stage traits.
 //! * [`executor`] — the stages on the bus, and the absolute-deadline loop.
 //! * [`events`] — the log of the hardware edge, fed from the real-time thread without blocking.
 //! * [`schedule`], [`rt`], [`signals`] — deadlines, real-time set-up, stop requests.
 //! * [`process`] — the `conductor-executor` program.
 //! * [`launcher`] — `conductor launch`: start, supervise and stop the executors of a manifest.
-//! * [`stress`] — the thesis' stress test (sine states and an external logger).
-//! * [`demo`] — the mini-Hubo demo's gait and PID (the `conductor-demo` program).
 //! * [`soak`] — the fault campaign on the simulated robots of deploy/ (`conductor-soak`).
 //! * [`cleanup`] — the domain's iceoryx2 nodes, and removing what dead ones left behind.
 //!
@@ -31,15 +28,12 @@ macro_rules! note {
 }
 
 pub mod cleanup;
-pub mod demo;
 pub mod events;
 pub mod executor;
 pub mod launcher;
-pub mod manifest;
 pub mod process;
 pub mod rt;
 pub mod schedule;
 pub mod signals;
 pub mod soak;
 pub mod stages;
-pub mod stress;

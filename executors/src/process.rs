@@ -15,18 +15,23 @@
 //! cannot help); 3 real time required but not permitted; 4 a stop whose safe actions could not
 //! all be confirmed (each device named on stderr).
 
+#[cfg(feature = "cli")]
 use std::ffi::OsString;
 use std::io::Write as _;
 use std::path::PathBuf;
+#[cfg(feature = "cli")]
 use std::process::ExitCode;
 
+#[cfg(feature = "cli")]
 use clap::Parser;
 use conductor_bus::{prepare_thread, Bus, Domain};
 
 use crate::executor::{run_from, Executor, StopReport};
-use crate::manifest::Manifest;
 use crate::rt::{self, RtRequest};
-use crate::signals::{self, Stop};
+#[cfg(feature = "cli")]
+use crate::signals;
+use crate::signals::Stop;
+use conductor_manifest::Manifest;
 
 /// Exit status of an orderly stop.
 pub const EXIT_OK: u8 = 0;
@@ -48,27 +53,31 @@ pub const STOP_CONFIRM_NS: u64 = 1_000_000_000;
 pub const READY: &str = "READY";
 
 /// Command line of the executor.
-#[derive(Debug, Parser)]
-#[command(
-    name = "conductor-executor",
-    version,
-    about = "Runs one subsystem of a Conductor manifest in real time"
+#[derive(Debug)]
+#[cfg_attr(feature = "cli", derive(Parser))]
+#[cfg_attr(
+    feature = "cli",
+    command(
+        name = "conductor-executor",
+        version,
+        about = "Runs one subsystem of a Conductor manifest in real time"
+    )
 )]
 pub struct ExecutorArgs {
     /// The manifest (TOML).
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub manifest: PathBuf,
     /// The subsystem to run.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub subsystem: String,
     /// Bus domain (default: the manifest's `domain`, else $CONDUCTOR_DOMAIN, else "default").
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub domain: Option<String>,
     /// Do not attempt real-time set-up (normal scheduling, no pinning, no memory lock).
-    #[arg(long, conflicts_with = "require_rt")]
+    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "require_rt"))]
     pub no_rt: bool,
     /// Refuse to run without real time, whatever the manifest says.
-    #[arg(long)]
+    #[cfg_attr(feature = "cli", arg(long))]
     pub require_rt: bool,
 }
 
@@ -83,6 +92,7 @@ pub fn resolve_domain(explicit: Option<&str>, manifest: &Manifest) -> Result<Dom
 }
 
 /// Runs the executor with `args` (program name first) and returns its exit status.
+#[cfg(feature = "cli")]
 pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
     let args = match ExecutorArgs::try_parse_from(args) {
         Ok(a) => a,
@@ -99,7 +109,10 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>) -> ExitCode {
     ExitCode::from(execute(&args, &stop))
 }
 
-fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
+/// Runs the subsystem `args` names until `stop` is requested (or it fails) and returns its exit
+/// status (one of the `EXIT_*` codes). [`main_with_args`] is this after parsing the command line
+/// and taking SIGINT/SIGTERM.
+pub fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     let tag = format!("conductor-executor[{}]", args.subsystem);
     let manifest = match Manifest::load(&args.manifest) {
         Ok(m) => m,

@@ -42,7 +42,7 @@ use conductor_devices::{
     LinkState, Phase, Reply, Request, SafeAction, SafeProgress, Startup, TickCtx, Update,
 };
 
-use crate::manifest::{Calibration, SafeSpec, Subsystem};
+use conductor_manifest::{Calibration, SafeSpec, Subsystem};
 
 /// A value ready to publish for one state.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -170,7 +170,9 @@ pub enum Event {
     },
 }
 
-struct StateRt {
+/// One state as the stages schedule it: its device channel, divisor and calibration, the newest
+/// value and the status flags it is published with.
+struct ScheduledState {
     device: usize,
     channel: usize,
     divisor: u64,
@@ -197,7 +199,7 @@ struct StateRt {
     pending: Option<f64>,
 }
 
-impl StateRt {
+impl ScheduledState {
     fn status(&self) -> u32 {
         let mut s = 0;
         if self.stale {
@@ -235,7 +237,8 @@ struct ChannelCache {
     write: Option<f64>,
 }
 
-struct DeviceRt {
+/// One device as the stages schedule it: the driver, its link, its request cache and lifecycle.
+struct ScheduledDevice {
     dev: Box<dyn Device>,
     link: usize,
     divisor: u64,
@@ -258,7 +261,9 @@ struct DeviceRt {
     watchdog: bool,
 }
 
-struct LinkRt {
+/// One link (protocol over hardware) as the stages schedule it: its queues, the credentials that
+/// route its replies, and the bus's condition.
+struct ScheduledLink {
     link: Box<dyn Link>,
     protocol_divisor: u64,
     hardware_divisor: u64,
@@ -278,9 +283,9 @@ struct Watchdog {
 
 /// A subsystem's components, scheduled tick by tick.
 pub struct Stages {
-    states: Vec<StateRt>,
-    devices: Vec<DeviceRt>,
-    links: Vec<LinkRt>,
+    states: Vec<ScheduledState>,
+    devices: Vec<ScheduledDevice>,
+    links: Vec<ScheduledLink>,
     watchdog: Watchdog,
     counters: Counters,
     events: Bounded<Event>,
@@ -348,11 +353,11 @@ impl Stages {
         assert_eq!(links.len(), sub.protocols.len(), "one link per protocol");
         assert_eq!(devices.len(), sub.devices.len(), "one device per device");
         let caps = capacities(sub);
-        let mut link_rt: Vec<LinkRt> = links
+        let mut scheduled_links: Vec<ScheduledLink> = links
             .into_iter()
             .zip(&sub.protocols)
             .zip(&caps)
-            .map(|((link, p), cap)| LinkRt {
+            .map(|((link, p), cap)| ScheduledLink {
                 link,
                 protocol_divisor: u64::from(p.divisor),
                 hardware_divisor: u64::from(sub.hardware[p.hardware].divisor),
@@ -364,10 +369,10 @@ impl Stages {
                 condition: BusCondition::default(),
             })
             .collect();
-        let mut dev_rt = Vec::with_capacity(devices.len());
+        let mut scheduled_devices = Vec::with_capacity(devices.len());
         for (i, (dev, d)) in devices.into_iter().zip(&sub.devices).enumerate() {
             let channels = d.channels.len();
-            let link = &mut link_rt[d.protocol];
+            let link = &mut scheduled_links[d.protocol];
             link.creds.push((d.credential, i));
             let ratio = link.protocol_divisor.div_ceil(u64::from(d.divisor)) as usize;
             let up = per_device_tick(channels) * (ratio + 2) * 2;
@@ -393,7 +398,7 @@ impl Stages {
                     }
                 }
             });
-            dev_rt.push(DeviceRt {
+            scheduled_devices.push(ScheduledDevice {
                 dev,
                 link: d.protocol,
                 divisor: u64::from(d.divisor),
@@ -415,7 +420,7 @@ impl Stages {
             .states
             .iter()
             .enumerate()
-            .map(|(i, s)| StateRt {
+            .map(|(i, s)| ScheduledState {
                 device: s.device,
                 channel: s.channel,
                 divisor: u64::from(s.divisor),
@@ -441,8 +446,8 @@ impl Stages {
             .collect();
         Self {
             states,
-            devices: dev_rt,
-            links: link_rt,
+            devices: scheduled_devices,
+            links: scheduled_links,
             watchdog: Watchdog {
                 timeout_ns: sub.watchdog_ns,
                 last_frame_ns: None,

@@ -416,16 +416,7 @@ fn mit_and_odrive_over_socketcan() {
     });
     // A window of steady running between two fresh stats messages.
     let mut stats = StatsSubscriber::new(&bus, "front_left").unwrap();
-    let mut fresh = |after: u64| {
-        let end = Instant::now() + Duration::from_secs(5);
-        loop {
-            if let Some(s) = stats.latest().unwrap().filter(|s| s.seq > after) {
-                return s;
-            }
-            assert!(Instant::now() < end, "no stats");
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    };
+    let mut fresh = |after: u64| stats_after(&mut stats, after);
     let s0 = fresh(0);
     let s0 = fresh(s0.seq);
     // At least WINDOW ticks (a slow emulated machine takes longer; the bound only fails).
@@ -681,14 +672,7 @@ fn slcan_through_the_kernel() {
     // One frame per motor per tick reaches the adapter through the kernel.
     let mut stats = StatsSubscriber::new(&bus, "front_left").unwrap();
     let mut snap = |after: u64| {
-        let end = Instant::now() + Duration::from_secs(5);
-        let st = loop {
-            if let Some(s) = stats.latest().unwrap().filter(|s| s.seq > after) {
-                break s;
-            }
-            assert!(Instant::now() < end, "no stats");
-            std::thread::sleep(Duration::from_millis(5));
-        };
+        let st = stats_after(&mut stats, after);
         let f: Vec<u64> = (0..3)
             .map(|i| sim.sim().nodes()[i].snapshot().frames_in)
             .collect();
@@ -834,16 +818,7 @@ fn faults_only_a_kernel_shows() {
     };
     p1.until(30.0, "at its setpoint", fresh_at);
     let mut stats = StatsSubscriber::new(&bus, "front_left").unwrap();
-    let mut fresh_stats = |after: u64| {
-        let end = Instant::now() + Duration::from_secs(5);
-        loop {
-            if let Some(s) = stats.latest().unwrap().filter(|s| s.seq > after) {
-                return s;
-            }
-            assert!(Instant::now() < end, "no stats");
-            std::thread::sleep(Duration::from_millis(5));
-        }
-    };
+    let mut fresh_stats = |after: u64| stats_after(&mut stats, after);
 
     // Error frames from the driver: error-passive, bus-off, restarted.
     let e0 = fresh_stats(0);
@@ -1040,4 +1015,16 @@ fn wait_log_after(exec: &Exec, mark: usize, text: &str) -> String {
 
 fn count_lines(exec: &Exec, text: &str) -> usize {
     exec.log().iter().filter(|l| l.contains(text)).count()
+}
+
+/// The first stats message of `stats` newer than sequence number `after` (within 5 s).
+fn stats_after(stats: &mut StatsSubscriber, after: u64) -> conductor_bus::ExecutorStats {
+    let end = Instant::now() + Duration::from_secs(5);
+    loop {
+        if let Some(s) = stats.latest().unwrap().filter(|s| s.seq > after) {
+            return s;
+        }
+        assert!(Instant::now() < end, "no stats");
+        std::thread::sleep(Duration::from_millis(5));
+    }
 }

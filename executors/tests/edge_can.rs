@@ -303,11 +303,7 @@ fn after_a_stalled_adapter_every_sample_keeps_its_true_time() {
     let skip = p1.all.len();
     phase(&mut ctl, 300);
     p1.poll();
-    let before: Vec<StateSample> = p1.all[skip..]
-        .iter()
-        .filter(|s| s.status & status::STALE == 0)
-        .copied()
-        .collect();
+    let before = p1.fresh_from(skip);
     let (a, v) = fit(&before);
     assert!((1.5..2.1).contains(&v), "steady speed {v}");
     // The adapter stalls for 0.3 s, then delivers its backlog: ack k, reply k, ack k+1, ...
@@ -319,11 +315,7 @@ fn after_a_stalled_adapter_every_sample_keeps_its_true_time() {
     let mark = p1.all.len();
     phase(&mut ctl, 300);
     p1.poll();
-    let after: Vec<StateSample> = p1.all[mark..]
-        .iter()
-        .filter(|s| s.status & status::STALE == 0)
-        .copied()
-        .collect();
+    let after = p1.fresh_from(mark);
     assert!(
         after.len() > 50,
         "{} fresh samples after the stall",

@@ -71,6 +71,12 @@ fn start(
     (Exec::start(&path, "arm", &d), d)
 }
 
+/// [`start`], for a test in which the executor must run.
+fn running(tag: &str, text: &str) -> (Exec, Domain) {
+    let (r, d) = start(tag, text);
+    (r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}")), d)
+}
+
 #[test]
 fn a_wrong_model_stops_the_executor_naming_bus_id_expected_and_found() {
     let (sim, port) = bus("model", ids(3));
@@ -109,8 +115,7 @@ fn a_missing_servo_is_an_error_unless_optional() {
         + "[subsystems.arm.devices.j3]\nkind = \"dynamixel_x\"\nprotocol = \"robotis\"\nid = 3\noptional = true\n\
            [subsystems.arm.states.p3]\ndevice = \"j3\"\nchannel = \"position\"\n\
            [subsystems.arm.states.e3]\ndevice = \"j3\"\nchannel = \"enable\"\nwritable = true\n";
-    let (r, d) = start("optional", &text);
-    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let (mut exec, d) = running("optional", &text);
     let w = exec.wait_log(2, "warning: optional");
     assert!(w.contains("\"j3\"") && w.contains("STALE"), "{w}");
     let bus = Bus::open(&d, "t").unwrap();
@@ -152,8 +157,7 @@ fn eeprom_is_written_with_torque_off_and_read_back_then_enabled_where_it_is() {
         ..ids(2)
     };
     let (sim, port) = bus("eeprom", cfg);
-    let (r, _d) = start("eeprom", &manifest(&port, 2, "", "return_delay_us = 0"));
-    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let (mut exec, _d) = running("eeprom", &manifest(&port, 2, "", "return_delay_us = 0"));
     {
         let s = sim.sim();
         let log = s.instruction_log();
@@ -183,8 +187,7 @@ fn eeprom_is_written_with_torque_off_and_read_back_then_enabled_where_it_is() {
 #[test]
 fn a_hardware_error_trips_the_servo_and_enable_reboots_it() {
     let (sim, port) = bus("fault", ids(2));
-    let (r, d) = start("fault", &manifest(&port, 2, "", ""));
-    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let (mut exec, d) = running("fault", &manifest(&port, 2, "", ""));
     let bus = Bus::open(&d, "t").unwrap();
     let mut ctl = Controller::new(&bus);
     let mut p2 = Watch::new(&bus, "arm/p2");
@@ -256,8 +259,7 @@ fn a_hardware_error_trips_the_servo_and_enable_reboots_it() {
 #[test]
 fn reboot_on_fault_recovers_by_itself() {
     let (sim, port) = bus("reboot", ids(1));
-    let (r, d) = start("reboot", &manifest(&port, 1, "", "reboot_on_fault = true"));
-    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let (mut exec, d) = running("reboot", &manifest(&port, 1, "", "reboot_on_fault = true"));
     let bus = Bus::open(&d, "t").unwrap();
     let mut p1 = Watch::new(&bus, "arm/p1");
     p1.until(2.0, "up", |s| s.status & status::DISABLED == 0);
@@ -280,8 +282,7 @@ fn reboot_on_fault_recovers_by_itself() {
 #[test]
 fn the_watchdog_trips_setpoints_are_refused_until_enable_from_where_it_is() {
     let (sim, port) = bus("watchdog", ids(1));
-    let (r, d) = start("watchdog", &manifest(&port, 1, "watchdog_ms = 150", ""));
-    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let (mut exec, d) = running("watchdog", &manifest(&port, 1, "watchdog_ms = 150", ""));
     let bus = Bus::open(&d, "t").unwrap();
     let mut ctl = Controller::new(&bus);
     let mut p1 = Watch::new(&bus, "arm/p1");
@@ -387,8 +388,7 @@ fn a_hold_after_the_executor_did_not_run_holds_where_the_servo_is() {
 #[test]
 fn an_unplugged_port_is_reopened_and_the_servos_resume_without_a_restart() {
     let (sim, port) = bus("unplug", ids(2));
-    let (r, d) = start("unplug", &manifest(&port, 2, "", ""));
-    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let (mut exec, d) = running("unplug", &manifest(&port, 2, "", ""));
     let bus = Bus::open(&d, "t").unwrap();
     let mut ctl = Controller::new(&bus);
     let mut p1 = Watch::new(&bus, "arm/p1");
@@ -441,8 +441,7 @@ fn hold_off_stays_limp_until_the_first_setpoint_then_moves_from_where_it_is() {
         ..ids(1)
     };
     let (sim, port) = bus("holdoff", cfg);
-    let (r, d) = start("holdoff", &manifest(&port, 1, "", "startup = \"hold_off\""));
-    let mut exec = r.unwrap_or_else(|(s, log)| panic!("{s}: {log:#?}"));
+    let (mut exec, d) = running("holdoff", &manifest(&port, 1, "", "startup = \"hold_off\""));
     let bus = Bus::open(&d, "t").unwrap();
     let mut p1 = Watch::new(&bus, "arm/p1");
     let s = p1.until(2.0, "published", |_| true);

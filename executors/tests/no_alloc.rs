@@ -5,8 +5,8 @@ mod support;
 
 use conductor_bus::{prepare_thread, Bus, Controller, StateSubscriber, StatsSubscriber};
 use conductor_executor::executor::Executor;
-use conductor_executor::manifest::Manifest;
 use conductor_executor::schedule::Wake;
+use conductor_manifest::Manifest;
 use conductor_testkit::alloc::{measure as measured, Counting};
 
 #[global_allocator]

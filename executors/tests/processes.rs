@@ -1,78 +1,22 @@
-//! The launcher and the executors as real processes, each test in its own bus domain: rates seen
-//! by an external subscriber process, a frame applied in one tick, restart after SIGKILL,
-//! orderly SIGTERM leaving nothing behind, the command watchdog, and launches that must fail.
+//! The launcher and the executors as real processes, each test in its own bus domain: a frame
+//! applied in one tick, restart after SIGKILL, orderly SIGTERM leaving nothing behind, the
+//! command watchdog, launches that must fail, and restarted executors that inherit no descriptor
+//! of the launcher. (Rates seen by an external subscriber process: benches/tests/stress_logger.rs,
+//! beside the stress tool's logger.)
 //!
 //! Rates are modest (≤ 250 Hz) and sleep-based: the test machine has 2 CPUs.
 
 mod support;
 
-use std::collections::HashMap;
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Controller, StatsSubscriber};
 use conductor_executor::launcher::{Launch, LaunchError};
-use conductor_executor::stress::parse_line;
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
 use support::*;
-
-/// Deadline misses of a subsystem so far, from its stats.
-fn misses(bus: &Bus, subsystem: &str) -> u64 {
-    let mut s = StatsSubscriber::new(bus, subsystem).unwrap();
-    eventually(5, "stats", || s.latest().unwrap()).misses
-}
-
-#[test]
-fn an_external_subscriber_sees_every_state_at_its_rate() {
-    let (d, _guard) = private_domain("rates");
-    let launch = Launch::start(&test_manifest("two-subsystems.toml"), options(&d)).unwrap();
-    let states = [
-        "arm/j0",
-        "arm/j1",
-        "arm/j2",
-        "arm/j3",
-        "arm/j4",
-        "arm/j5",
-        "sensors/a",
-        "sensors/b",
-        "sensors/c",
-    ];
-    let out = Command::new(STRESS)
-        .args(["log", "--domain", d.name(), "--seconds", "2", "--states"])
-        .arg(states.join(","))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let bus = Bus::open(&d, "test").unwrap();
-    let skipped = misses(&bus, "arm") + misses(&bus, "sensors");
-    let text = String::from_utf8(out.stdout).unwrap();
-    let rows: Vec<HashMap<String, String>> = text.lines().map(parse_line).collect();
-    assert_eq!(rows.len(), states.len(), "{text}");
-    let expected_rates = [200.0, 200.0, 200.0, 200.0, 200.0, 200.0, 250.0, 125.0, 50.0];
-    for (row, (name, rate)) in rows.iter().zip(states.iter().zip(expected_rates)) {
-        assert_eq!(row["state"], *name);
-        assert_eq!(row["rate_hz"].parse::<f64>().unwrap(), rate, "{name}");
-        assert_eq!(row["missed"], "0", "{name}: the subscriber lost samples");
-        // Samples are counted by their sample time over a 2 s window: one per period, ±1 for
-        // where the window's edges fall. A deadline the executor missed (its slot skipped,
-        // reported in its stats) publishes nothing, so it may lower the count.
-        let count: f64 = row["count"].parse().unwrap();
-        let want = rate * 2.0;
-        assert!(
-            count <= want + 1.0 && count >= want - 1.0 - skipped as f64,
-            "{name}: {count} samples in 2 s at {rate} Hz ({skipped} deadline misses): {text}"
-        );
-    }
-    drop(bus);
-    launch.stop();
-    launch.wait().unwrap();
-}
 
 #[test]
 fn a_frame_of_six_setpoints_is_applied_in_one_tick() {
@@ -386,4 +330,70 @@ fn launches_that_cannot_run_fail_with_the_reason() {
     first.wait().unwrap();
     let _ = std::fs::remove_file(bad);
     let _ = std::fs::remove_file(rt);
+}
+
+/// The descriptors of process `pid`, each with what it points at.
+fn descriptors(pid: u32) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(format!("/proc/{pid}/fd"))
+        .unwrap()
+        .map_while(Result::ok)
+        .map(|e| {
+            let target = std::fs::read_link(e.path()).unwrap_or_default();
+            format!(
+                "{} -> {}",
+                e.file_name().to_string_lossy(),
+                target.display()
+            )
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+/// An executor restarted after SIGKILL holds as many descriptors at READY as the first did: the
+/// launcher's own (its bus node, opened after the first start) are not inherited.
+#[test]
+fn a_restarted_executor_starts_with_the_descriptors_of_the_first() {
+    // The launcher as its own process: its children can only inherit the launcher's descriptors.
+    let (d, _guard) = private_domain("fds");
+    let mut launcher = Command::new(LAUNCHER)
+        .arg(test_manifest("two-subsystems.toml"))
+        .args(["--domain", d.name(), "--only", "sensors", "--no-rt"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(launcher.stderr.take().unwrap()).lines();
+    let mut next_ready = || loop {
+        let line = lines.next().expect("launcher output").unwrap();
+        if let Some(rest) = line.split("ready (pid ").nth(1) {
+            return rest.trim_end_matches(')').parse::<u32>().unwrap();
+        }
+    };
+    let mut counts = Vec::new();
+    let mut first = Vec::new();
+    for round in 0..5 {
+        let pid = next_ready();
+        let fds = descriptors(pid);
+        counts.push(fds.len());
+        if round == 0 {
+            first = fds.clone();
+        }
+        assert_eq!(
+            fds.len(),
+            first.len(),
+            "executor {round} (pid {pid}) starts with other descriptors than the first: \
+             {fds:#?}\nthe first had {first:#?}"
+        );
+        kill(Pid::from_raw(pid as i32), Signal::SIGKILL).unwrap();
+    }
+    let pid = next_ready();
+    kill(Pid::from_raw(launcher.id() as i32), Signal::SIGTERM).unwrap();
+    let status = launcher.wait().unwrap();
+    assert!(status.success(), "launcher: {status}");
+    assert!(
+        counts.iter().all(|&c| c == counts[0]),
+        "{counts:?} (last pid {pid})"
+    );
 }

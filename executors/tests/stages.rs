@@ -11,8 +11,8 @@ use conductor_devices::{
     Bounded, Credential, HwError, Link, LinkCounters, LinkState, Op, Reply, ReplyData, Request,
     TickCtx,
 };
-use conductor_executor::manifest::{Manifest, Subsystem};
 use conductor_executor::stages::{Publish, Stages};
+use conductor_manifest::{Manifest, Subsystem};
 
 const MS: u64 = 1_000_000;
 

@@ -5,7 +5,7 @@
 //! 1. **IPC floor**: the four ping-pong paths of [`crate::pingpong`] (raw iceoryx2 busy-poll and
 //!    event-woken, the Conductor bus over each).
 //! 2. For every rate: **cyclictest** at that rate, priority and CPU (the kernel's wake-up floor),
-//!    then the **stress test** ([`conductor_executor::stress::run`]) for each number of sine
+//!    then the **stress test** ([`crate::stress::run`]) for each number of sine
 //!    states, with the command probe: tick lateness, misses, executor CPU, sample → subscriber,
 //!    command → hardware write, the thesis' error.
 //! 3. Plots (lateness histograms beside cyclictest's per rate, the error against time per rate
@@ -25,8 +25,8 @@ use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use crate::stress::{self, RunError, RunOptions, RunResult, StressConfig};
 use conductor_executor::launcher::LaunchOptions;
-use conductor_executor::stress::{self, RunError, RunOptions, RunResult, StressConfig};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::pingpong::{self, Mode, PingPongError};

@@ -424,7 +424,7 @@ impl Report {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use conductor_executor::stress::parse_line as kv;
+    use crate::stress::parse_line as kv;
 
     #[test]
     fn quantiles_read_a_stress_line_in_ns() {

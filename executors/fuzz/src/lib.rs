@@ -2,7 +2,7 @@
 //! binary in `fuzz_targets/` calls it, and `executors/tests/fuzz_corpus.rs` includes this file
 //! to replay the committed seed and regression corpora as an ordinary test.
 
-use conductor_executor::manifest::Manifest;
+use conductor_manifest::Manifest;
 
 /// A target's check: panics when the input shows a bug.
 pub type Check = fn(&[u8]);

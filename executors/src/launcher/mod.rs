@@ -16,230 +16,25 @@
 //! # Ok::<(), conductor_executor::launcher::LaunchError>(())
 //! ```
 
+mod error;
+mod options;
 mod supervisor;
 
-use std::ffi::OsString;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::Duration;
 
 use crate::cleanup::{executor_node_name, gateway_node_name, scan_and_clean};
-use crate::manifest::{GatewayDef, GatewayKind, Manifest, ManifestError, ViewDef, BRIDGE_NAME};
 use crate::process::resolve_domain;
 use crate::signals::{self, Stop};
+use conductor_manifest::{
+    GatewayDef, GatewayKind, GatewayOptions, Manifest, ManifestError, ViewDef, BRIDGE_NAME,
+};
+use error::tail_text;
+pub use error::LaunchError;
+pub use options::{default_executor, default_gateway, LaunchOptions};
 use supervisor::Supervisor;
-
-/// How to launch.
-#[derive(Debug, Clone)]
-pub struct LaunchOptions {
-    /// The executor program.
-    pub executor: PathBuf,
-    /// Arguments put before the executor's own (e.g. a sub-command when a program runs itself
-    /// as the executor).
-    pub executor_args: Vec<OsString>,
-    /// The program of `kind = "score"` gateways (`score-gateway` or a program running its main).
-    pub gateway: PathBuf,
-    /// Arguments put before the gateway's own (e.g. a sub-command).
-    pub gateway_args: Vec<OsString>,
-    /// The program of the manifest's `[view]` (`conductor`).
-    pub view: PathBuf,
-    /// Arguments put before the view's own `--domain`, `--listen`, `--clamp` (the `view`
-    /// sub-command).
-    pub view_args: Vec<OsString>,
-    /// The program run for a manifest's `[bridge]` table (`conductor`, with `bridge_args`).
-    pub bridge: PathBuf,
-    /// Arguments put before the bridge's own (`bridge`: the sub-command).
-    pub bridge_args: Vec<OsString>,
-    /// Bus domain (default: the manifest's, else `CONDUCTOR_DOMAIN`, else "default").
-    pub domain: Option<String>,
-    /// Only these subsystems (empty: all).
-    pub only: Vec<String>,
-    /// Run the executors without real-time set-up.
-    pub no_rt: bool,
-    /// No live summary (events — ready, restarts, stops — are always reported on stderr).
-    pub quiet: bool,
-    /// Summary interval (default: 1 s on a terminal, 10 s otherwise).
-    pub summary_interval: Option<Duration>,
-    /// Time an executor has to print `READY`.
-    pub ready_timeout: Duration,
-    /// Time executors have to stop after SIGTERM before they are killed.
-    pub stop_timeout: Duration,
-    /// First restart delay; doubles with each consecutive crash.
-    pub backoff: Duration,
-    /// Longest restart delay.
-    pub backoff_max: Duration,
-    /// Crashes tolerated within [`restart_window`](Self::restart_window) before giving up.
-    pub max_restarts: u32,
-    /// See [`max_restarts`](Self::max_restarts).
-    pub restart_window: Duration,
-    /// Turn SIGINT/SIGTERM into a stop request (call from the main thread before any other
-    /// thread is started; see [`signals::install`]).
-    pub handle_signals: bool,
-}
-
-impl Default for LaunchOptions {
-    fn default() -> Self {
-        Self {
-            executor: default_executor(),
-            executor_args: Vec::new(),
-            gateway: default_gateway(),
-            gateway_args: Vec::new(),
-            view: beside_me("conductor"),
-            view_args: vec!["view".into()],
-            bridge: beside_me("conductor"),
-            bridge_args: vec!["bridge".into()],
-            domain: None,
-            only: Vec::new(),
-            no_rt: false,
-            quiet: false,
-            summary_interval: None,
-            ready_timeout: Duration::from_secs(10),
-            stop_timeout: Duration::from_secs(5),
-            backoff: Duration::from_millis(200),
-            backoff_max: Duration::from_secs(5),
-            max_restarts: 5,
-            restart_window: Duration::from_secs(60),
-            handle_signals: true,
-        }
-    }
-}
-
-/// `conductor-executor` next to the running program (where cargo and installers put it), else
-/// the one on `PATH`.
-pub fn default_executor() -> PathBuf {
-    beside_me("conductor-executor")
-}
-
-/// `score-gateway` next to the running program, else the one on `PATH`.
-pub fn default_gateway() -> PathBuf {
-    beside_me("score-gateway")
-}
-
-/// The program `name` next to the running one (or one directory up), else `name` for `PATH`.
-fn beside_me(name: &str) -> PathBuf {
-    std::env::current_exe()
-        .ok()
-        .and_then(|exe| {
-            let dir = exe.parent()?;
-            // Test and example binaries live one level below the binaries.
-            [dir.join(name), dir.parent()?.join(name)]
-                .into_iter()
-                .find(|p| p.is_file())
-        })
-        .unwrap_or_else(|| PathBuf::from(name))
-}
-
-/// Why a launch failed.
-#[derive(Debug, thiserror::Error)]
-pub enum LaunchError {
-    /// The manifest is invalid (every problem listed).
-    #[error("{0}")]
-    Manifest(#[from] ManifestError),
-    /// The domain name is unusable.
-    #[error("{0}")]
-    Domain(String),
-    /// `only` names a subsystem the manifest lacks.
-    #[error("the manifest has no subsystem {name:?}; expected one of: {known}")]
-    UnknownSubsystem {
-        /// Asked for.
-        name: String,
-        /// What exists.
-        known: String,
-    },
-    /// An executor of this subsystem already runs in the domain.
-    #[error("subsystem {subsystem:?} already runs in domain {domain:?} (process {pid}); stop it first or use another domain")]
-    AlreadyRunning {
-        /// The subsystem.
-        subsystem: String,
-        /// The domain.
-        domain: String,
-        /// Its process.
-        pid: String,
-    },
-    /// The executor program could not be started.
-    #[error("cannot start the executor program {program:?} for subsystem {subsystem:?}: {source} (build it with `cargo build -p conductor-executor`, or point LaunchOptions::executor at it)")]
-    Spawn {
-        /// The subsystem.
-        subsystem: String,
-        /// The program.
-        program: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// The view program could not be started.
-    #[error("cannot start the view program {program:?}: {source} (build it with `cargo build -p conductor-cli`, or point LaunchOptions::view at it)")]
-    SpawnView {
-        /// The program.
-        program: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// A gateway program could not be started.
-    #[error("cannot start the gateway program {program:?} for gateway {gateway:?}: {source} (build it with `cargo build -p score-gateway`, or point LaunchOptions::gateway at it)")]
-    SpawnGateway {
-        /// The gateway.
-        gateway: String,
-        /// The program.
-        program: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// An executor exited or hung before it was ready.
-    #[error("the executor of subsystem {subsystem:?} did not become ready: {status}{}", tail_text(.output))]
-    NotReady {
-        /// The subsystem.
-        subsystem: String,
-        /// What happened.
-        status: String,
-        /// Its last lines of output.
-        output: Vec<String>,
-    },
-    /// An executor reported that it cannot run (configuration, real time required), so a restart
-    /// cannot help.
-    #[error("the executor of subsystem {subsystem:?} cannot run ({status}){}", tail_text(.output))]
-    CannotRun {
-        /// The subsystem.
-        subsystem: String,
-        /// Its exit status.
-        status: String,
-        /// Its last lines of output.
-        output: Vec<String>,
-    },
-    /// An executor kept crashing.
-    #[error("the executor of subsystem {subsystem:?} crashed {crashes} times within {window:?} (last: {status}); giving up{}", tail_text(.output))]
-    TooManyRestarts {
-        /// The subsystem.
-        subsystem: String,
-        /// Crashes counted.
-        crashes: u32,
-        /// The window.
-        window: Duration,
-        /// Last exit status.
-        status: String,
-        /// Its last lines of output.
-        output: Vec<String>,
-    },
-    /// At the orderly stop, some executors or gateways did not exit cleanly (or a gateway had
-    /// been given up).
-    #[error("not every executor and gateway stopped cleanly: {}", .failures.join("; "))]
-    Unclean {
-        /// `subsystem: status` for each.
-        failures: Vec<String>,
-    },
-    /// The domain could not be inspected or joined.
-    #[error("{0}")]
-    Bus(String),
-}
-
-fn tail_text(lines: &[String]) -> String {
-    if lines.is_empty() {
-        String::new()
-    } else {
-        format!("; its last output:\n  {}", lines.join("\n  "))
-    }
-}
 
 /// What a supervised process is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -372,11 +167,10 @@ impl Launch {
                 port: manifest_path
                     .canonicalize()
                     .unwrap_or_else(|_| manifest_path.to_path_buf()),
-                max_rate_hz: None,
-                lazy_rate_hz: None,
-                restore: false,
-                retry_ms: None,
-                watchdog_ms: None,
+                options: GatewayOptions {
+                    restore: false,
+                    ..GatewayOptions::default()
+                },
             });
         }
 

@@ -330,7 +330,7 @@ fn run(
         .create::<RtIpc>()
         .map_err(|e| conductor_bus::BusError::Iceoryx {
             context: "soak monitor node".into(),
-            detail: format!("{e:?}"),
+            source: e.into(),
         })?;
     let mut eyes = Vec::new();
     for (robot, shared) in robots {

@@ -951,7 +951,7 @@ impl Run {
             + 2_000_000
             + starved
             + lost_round_trips
-                * (score_gateway::link::RESEND_AFTER.as_nanos() as u64 + GATEWAY_LOOP_NS);
+                * (score_gateway::client::RESEND_AFTER.as_nanos() as u64 + GATEWAY_LOOP_NS);
         let mut result = Ok(());
         match safe_at {
             None => {

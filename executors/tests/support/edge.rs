@@ -153,6 +153,15 @@ pub struct Watch {
 }
 
 impl Watch {
+    /// The samples recorded from index `from` on that are not STALE.
+    pub fn fresh_from(&self, from: usize) -> Vec<StateSample> {
+        self.all[from..]
+            .iter()
+            .filter(|s| s.status & conductor_bus::status::STALE == 0)
+            .copied()
+            .collect()
+    }
+
     pub fn new(bus: &Bus, name: &str) -> Watch {
         Watch {
             sub: StateSubscriber::with_buffer(bus, name, 1024).unwrap(),

@@ -16,7 +16,6 @@ pub mod edge;
 
 pub const EXECUTOR: &str = env!("CARGO_BIN_EXE_conductor-executor");
 pub const LAUNCHER: &str = env!("CARGO_BIN_EXE_conductor-launch");
-pub const STRESS: &str = env!("CARGO_BIN_EXE_conductor-stress");
 
 /// Options for an in-process launch in `domain`: this build's executor, no signal handling
 /// (the test harness owns the process), no summary.

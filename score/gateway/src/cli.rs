@@ -16,6 +16,7 @@ use std::time::Duration;
 
 use clap::Parser;
 use conductor_bus::{Bus, Domain};
+use conductor_manifest::{GatewayOptions, ScoreGatewayArgs};
 
 use crate::{Gateway, Options};
 
@@ -26,32 +27,26 @@ use crate::{Gateway, Options};
     about = "A Score board's variables as Conductor states"
 )]
 struct Cli {
-    /// The board's link port (its second USB serial port, e.g. /dev/score-link or /dev/ttyACM1).
-    #[arg(long)]
-    port: PathBuf,
-    /// Subsystem name (default: score-<board name>).
-    #[arg(long)]
-    subsystem: Option<String>,
-    /// Domain (default: $CONDUCTOR_DOMAIN, else "default").
-    #[arg(long)]
-    domain: Option<String>,
-    /// Highest publish rate per variable, Hz.
-    #[arg(long, default_value_t = 1000.0)]
-    max_rate: f64,
-    /// Publish rate of bare expressions and constants, Hz.
-    #[arg(long, default_value_t = 10.0)]
-    lazy_rate: f64,
-    /// Do not replay the last configuration onto a board that comes back empty.
-    #[arg(long)]
-    no_restore: bool,
-    /// Milliseconds between reconnection attempts.
-    #[arg(long, default_value_t = 200)]
-    retry_ms: u64,
-    /// Command watchdog (ms): once a controller has set variables, no command for this long
-    /// sets them to their safe value (0, clamped into their limits) and flags them. Off unless
-    /// given.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=60_000))]
-    watchdog_ms: Option<u64>,
+    /// Everything the launcher passes (the same struct it builds the command line from).
+    #[command(flatten)]
+    args: ScoreGatewayArgs,
+}
+
+/// The gateway's [`Options`] from its command line: what is not given keeps its default.
+pub fn options(port: PathBuf, subsystem: Option<String>, o: &GatewayOptions) -> Options {
+    let d = Options::default();
+    Options {
+        port,
+        subsystem,
+        max_rate_hz: o.max_rate_hz.unwrap_or(d.max_rate_hz),
+        lazy_rate_hz: o.lazy_rate_hz.unwrap_or(d.lazy_rate_hz),
+        restore: o.restore,
+        retry: o
+            .retry_ms
+            .map_or(d.retry, |ms| Duration::from_millis(ms.max(10))),
+        watchdog: o.watchdog_ms.map(Duration::from_millis),
+        ..d
+    }
 }
 
 /// Bad arguments (the launcher does not restart a gateway that exits with it).
@@ -76,7 +71,7 @@ where
     T: Into<OsString> + Clone,
 {
     let cli = match Cli::try_parse_from(args) {
-        Ok(c) => c,
+        Ok(c) => c.args,
         Err(e) => {
             let _ = e.print();
             return if e.use_stderr() {
@@ -86,7 +81,8 @@ where
             };
         }
     };
-    if !(cli.max_rate > 0.0 && cli.lazy_rate > 0.0) {
+    let opts = options(cli.port, cli.subsystem.clone(), &cli.options);
+    if !(opts.max_rate_hz > 0.0 && opts.lazy_rate_hz > 0.0) {
         eprintln!("score-gateway: --max-rate and --lazy-rate must be above 0");
         return ExitCode::from(EXIT_USAGE);
     }
@@ -102,7 +98,7 @@ where
             return ExitCode::from(EXIT_USAGE);
         }
     };
-    let node = node_name(cli.subsystem.as_deref());
+    let node = node_name(opts.subsystem.as_deref());
     let bus = match Bus::open(&domain, &node) {
         Ok(b) => b,
         Err(e) => {
@@ -116,16 +112,6 @@ where
             eprintln!("score-gateway: cannot handle signal {sig}: {e}");
         }
     }
-    let opts = Options {
-        port: cli.port,
-        subsystem: cli.subsystem,
-        max_rate_hz: cli.max_rate,
-        lazy_rate_hz: cli.lazy_rate,
-        restore: !cli.no_restore,
-        retry: Duration::from_millis(cli.retry_ms.max(10)),
-        watchdog: cli.watchdog_ms.map(Duration::from_millis),
-        ..Options::default()
-    };
     let mut gw = Gateway::new(opts, bus, stop);
     let ended = gw.run();
     let st = gw.stats;
@@ -140,5 +126,53 @@ where
             eprintln!("score-gateway: {e}");
             ExitCode::FAILURE
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use conductor_manifest::{GatewayDef, GatewayKind};
+
+    fn parse(args: &[OsString]) -> ScoreGatewayArgs {
+        let argv = std::iter::once(OsString::from("score-gateway")).chain(args.iter().cloned());
+        Cli::try_parse_from(argv).unwrap().args
+    }
+
+    /// What the launcher writes from a manifest's gateway is what the gateway reads back.
+    #[test]
+    fn the_launchers_command_line_reads_back_as_the_manifests_options() {
+        let mut def = GatewayDef {
+            name: "board".into(),
+            kind: GatewayKind::Score,
+            port: "/dev/score-link".into(),
+            options: GatewayOptions::default(),
+        };
+        for options in [
+            GatewayOptions::default(),
+            GatewayOptions {
+                max_rate_hz: Some(500.0),
+                lazy_rate_hz: Some(2.5),
+                restore: false,
+                retry_ms: Some(50),
+                watchdog_ms: Some(250),
+            },
+        ] {
+            def.options = options;
+            let args = ScoreGatewayArgs::for_gateway(&def, "d1");
+            assert_eq!(parse(&args.to_args()), args);
+        }
+        let o = options("/dev/x".into(), None, &GatewayOptions::default());
+        let d = Options::default();
+        assert_eq!(
+            (
+                o.max_rate_hz,
+                o.lazy_rate_hz,
+                o.restore,
+                o.retry,
+                o.watchdog
+            ),
+            (d.max_rate_hz, d.lazy_rate_hz, true, d.retry, None)
+        );
     }
 }

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use conductor_protocols::score_link::FrameError;
 
-use crate::link::Answer;
+use crate::client::Answer;
 
 /// Gateway failures. `Disconnected` and `Timeout` lead to a reconnect; the others are reported.
 #[derive(Debug, thiserror::Error)]

@@ -1,9 +1,9 @@
 //! The gateway loop: connect, handshake, publish, forward commands, reconnect.
 //!
 //! ```text
-//!  board ──score_link──► Link ──Event::Samples──► ClockMap (board µs → host ns)
+//!  board ──score_link──► BoardClient ──Event::Samples──► ClockMap (board µs → host ns)
 //!                                                   └► StatePublisher conductor/score-<board>/<var>
-//!  Controller ──CommandFrame──► CommandReceiver ──► Link::request(Set) ──► board
+//!  Controller ──CommandFrame──► CommandReceiver ──► BoardClient::request(Set) ──► board
 //! ```
 //!
 //! The states of a gateway only grow: a variable keeps its state (and index) for the gateway's
@@ -22,9 +22,9 @@ use conductor_bus::{
 };
 use conductor_protocols::score_link::{Request, VERSION};
 
+use crate::client::{Answer, BoardClient, BoardVar, Event};
 use crate::clock::ClockMap;
 use crate::error::GatewayError;
-use crate::link::{Answer, BoardVar, Event, Link};
 
 /// How the gateway runs.
 #[derive(Debug, Clone)]
@@ -143,7 +143,7 @@ impl Gateway {
     pub fn run(&mut self) -> Result<(), GatewayError> {
         let mut last_error = String::new();
         while !self.stop.load(Ordering::Relaxed) {
-            let r = Link::open(&self.opts.port).and_then(|mut link| self.serve(&mut link));
+            let r = BoardClient::open(&self.opts.port).and_then(|mut link| self.serve(&mut link));
             match r {
                 Ok(()) => return Ok(()),
                 Err(e) if e.is_link_loss() || matches!(e, GatewayError::Board { .. }) => {
@@ -165,7 +165,7 @@ impl Gateway {
         Ok(())
     }
 
-    fn serve(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+    fn serve(&mut self, link: &mut BoardClient) -> Result<(), GatewayError> {
         self.handshake(link)?;
         let mut last_ping = Instant::now();
         while !self.stop.load(Ordering::Relaxed) {
@@ -182,7 +182,7 @@ impl Gateway {
     }
 
     /// Publishes the samples and acts on the table changes the link has queued.
-    fn handle_events(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+    fn handle_events(&mut self, link: &mut BoardClient) -> Result<(), GatewayError> {
         while let Some(ev) = link.next_event() {
             match ev {
                 Event::Samples { t_us, values, .. } => self.publish(t_us, &values)?,
@@ -193,7 +193,7 @@ impl Gateway {
         Ok(())
     }
 
-    fn handshake(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+    fn handshake(&mut self, link: &mut BoardClient) -> Result<(), GatewayError> {
         let (board, firmware, number_type) = match link.request(Request::Hello)? {
             Answer::Hello {
                 board,
@@ -232,7 +232,7 @@ impl Gateway {
         Ok(())
     }
 
-    fn ping(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+    fn ping(&mut self, link: &mut BoardClient) -> Result<(), GatewayError> {
         let h0 = monotonic_ns();
         if let Answer::Time(b) = link.request(Request::Time)? {
             self.clock.add(h0, b, monotonic_ns());
@@ -240,7 +240,7 @@ impl Gateway {
         Ok(())
     }
 
-    fn list(link: &mut Link) -> Result<(Vec<BoardVar>, u32), GatewayError> {
+    fn list(link: &mut BoardClient) -> Result<(Vec<BoardVar>, u32), GatewayError> {
         match link.request(Request::ListVars)? {
             Answer::Vars(v, g) => Ok((v, g)),
             other => Err(GatewayError::Unexpected {
@@ -250,7 +250,7 @@ impl Gateway {
         }
     }
 
-    fn exec(link: &mut Link, line: &str) -> Result<(String, bool), GatewayError> {
+    fn exec(link: &mut BoardClient, line: &str) -> Result<(String, bool), GatewayError> {
         match link.request(Request::Exec { line })? {
             Answer::Exec(text, ok, _) => Ok((text, ok)),
             other => Err(GatewayError::Unexpected {
@@ -262,7 +262,7 @@ impl Gateway {
 
     /// Lists the board's table, restores it if the board came back empty, records its script,
     /// extends the states, and subscribes every variable.
-    fn sync(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+    fn sync(&mut self, link: &mut BoardClient) -> Result<(), GatewayError> {
         let (mut vars, mut generation) = Self::list(link)?;
         if self.restore_unfinished && !vars.is_empty() {
             // The last restore lost its link half-way (an `Exec` is not repeated): the board
@@ -454,7 +454,7 @@ impl Gateway {
         Ok(())
     }
 
-    fn forward_commands(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+    fn forward_commands(&mut self, link: &mut BoardClient) -> Result<(), GatewayError> {
         let Some(rx) = self.commands.as_mut() else {
             return Ok(());
         };
@@ -515,7 +515,7 @@ impl Gateway {
     /// refuses (it says why on stderr; a stale table is re-read).
     fn set(
         &mut self,
-        link: &mut Link,
+        link: &mut BoardClient,
         index: usize,
         id: u8,
         value: f64,
@@ -549,7 +549,7 @@ impl Gateway {
 
     /// The command watchdog: no setpoint for `opts.watchdog` after some came → every commanded
     /// variable goes to its safe value, once, until a controller commands again.
-    fn watchdog(&mut self, link: &mut Link) -> Result<(), GatewayError> {
+    fn watchdog(&mut self, link: &mut BoardClient) -> Result<(), GatewayError> {
         let (Some(limit), Some(last)) = (self.opts.watchdog, self.last_command) else {
             return Ok(());
         };

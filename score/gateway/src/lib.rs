@@ -9,12 +9,14 @@
 //! The gateway survives unplug/replug: it reopens the port, re-lists and re-subscribes, and
 //! restores the board's configuration if it came back empty ([`gateway`]).
 
+#[cfg(feature = "cli")]
 pub mod cli;
+pub mod client;
 pub mod clock;
 pub mod error;
 pub mod gateway;
-pub mod link;
 
+#[cfg(feature = "cli")]
 pub use cli::main_with_args;
 pub use error::GatewayError;
 pub use gateway::{Gateway, Options, Stats};

@@ -6,9 +6,9 @@ use std::ffi::OsString;
 use std::process::ExitCode;
 
 use conductor_benches::pingpong;
+use conductor_benches::stress::tool::{self, ToolContext};
 use conductor_benches::suite::{self, CyclicChoice, Helpers};
 use conductor_executor::launcher::LaunchOptions;
-use conductor_executor::stress::tool::{self, ToolContext};
 
 use crate::cli::BenchArgs;
 use crate::error::{CliError, Result};

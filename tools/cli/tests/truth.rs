@@ -374,7 +374,7 @@ fn replay_into_a_domain_with_live_owners_names_them_and_the_way_out() {
 
 #[test]
 fn simulated_states_of_the_shipped_manifests_start_inside_their_limits() {
-    use conductor_executor::manifest::Manifest;
+    use conductor_manifest::Manifest;
     let mut checked = Vec::new();
     let mut manifests: Vec<_> = std::fs::read_dir(workspace().join("deploy"))
         .unwrap()

@@ -3,7 +3,7 @@
 //!
 //! The traffic is found by running the scheduler's pipeline on paper, tick by tick over one
 //! hyperperiod (the least common multiple of the divisors involved), the way
-//! [`Stages`](crate::stages::Stages) runs it: a state raises its channel's sample and write flags
+//! `conductor_executor::stages::Stages` runs it: a state raises its channel's sample and write flags
 //! at its ticks, a device turns the flags into requests at its ticks, and the protocol puts
 //! everything queued since its last tick on the wire at its ticks. Assumptions:
 //!
@@ -629,7 +629,7 @@ impl Subsystem {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::manifest::Manifest;
+    use crate::Manifest;
     use conductor_protocols::{dynamixel1 as dxl1, dynamixel2 as dxl2};
 
     /// The packet lengths are those the encoders produce.

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use super::super::diag::{hint, one_of};
 use super::super::reader::{At, Table};
-use super::super::{GatewayDef, GatewayKind, GATEWAY_KEYS, MAX_RATE_HZ};
+use super::super::{GatewayDef, GatewayKind, GatewayOptions, GATEWAY_KEYS, MAX_RATE_HZ};
 use super::fields::check_name;
 use super::{Ctx, Resource};
 
@@ -91,10 +91,12 @@ pub(super) fn gateway(cx: &mut Ctx, name: &At<String>, t: &mut Table) -> Option<
         name: name.value.clone(),
         kind: kind?,
         port: PathBuf::from(port?),
-        max_rate_hz: max_rate.map(|r| r.value),
-        lazy_rate_hz: lazy_rate.map(|r| r.value),
-        restore: restore.is_none_or(|r| r.value),
-        retry_ms: retry.map(|r| r.value as u64),
-        watchdog_ms: watchdog.map(|w| w.value as u64),
+        options: GatewayOptions {
+            max_rate_hz: max_rate.map(|r| r.value),
+            lazy_rate_hz: lazy_rate.map(|r| r.value),
+            restore: restore.is_none_or(|r| r.value),
+            retry_ms: retry.map(|r| r.value as u64),
+            watchdog_ms: watchdog.map(|w| w.value as u64),
+        },
     })
 }

@@ -2,7 +2,7 @@
 //! they are rendered like errors, as `warning:`. A bus loaded above 80 % of its wire, an
 //! actuator nothing commands, and actuators that, once tripped, nothing could enable again.
 
-use conductor_executor::manifest::{Manifest, ManifestError, Severity};
+use conductor_manifest::{Manifest, ManifestError, Severity};
 
 /// `n` X-series servos on one 1 Mbit/s bus at 250 Hz; each gets `states` with `{i}` replaced.
 fn servos(n: usize, states: &str) -> String {

@@ -41,9 +41,9 @@ pub(super) fn view(cx: &mut Ctx, t: &mut Table) -> Option<ViewDef> {
 
 #[cfg(test)]
 mod tests {
-    use crate::manifest::{Manifest, ManifestError, ViewDef};
+    use crate::{Manifest, ManifestError, ViewDef};
 
-    const ROBOT: &str = include_str!("../../../tests/manifests/two-subsystems.toml");
+    const ROBOT: &str = include_str!("../../../executors/tests/manifests/two-subsystems.toml");
 
     fn parse(view: &str) -> Result<Manifest, ManifestError> {
         Manifest::parse(&format!("{ROBOT}\n{view}"), "robot.toml")

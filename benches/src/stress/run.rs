@@ -12,7 +12,7 @@ use conductor_bus::histogram::{bucket_range, Histogram, BUCKETS};
 use conductor_bus::{monotonic_ns, Bus, BusError, Domain, ExecutorStats, StatsSubscriber};
 
 use super::{manifest, parse_line, sine_states, StressConfig, PROBE_STATE, SUBSYSTEM};
-use crate::launcher::{Launch, LaunchError, LaunchOptions};
+use conductor_executor::launcher::{Launch, LaunchError, LaunchOptions};
 
 /// Why a stress run failed.
 #[derive(Debug, thiserror::Error)]

@@ -6,9 +6,14 @@
 //! index, every rate to a divisor of its subsystem's base rate and every kind's parameters to
 //! typed values, or a [`ManifestError::Invalid`] listing **every** problem with file, line,
 //! column, key and what was expected. The reference for every key is `docs/manifest.md`.
+//!
+//! The launcher and the executors (`conductor-executor`), the Score gateway and the `conductor`
+//! CLI share these typed values; nothing downstream parses the TOML again.
+#![warn(missing_docs)]
 
 pub mod busload;
 mod diag;
+pub mod gateway;
 mod reader;
 pub mod reference;
 mod validate;
@@ -19,6 +24,7 @@ use conductor_devices::kinds::{KindSpec, Params, KINDS};
 use conductor_devices::{Channel, Credential, Startup};
 
 pub use diag::{Diagnostic, Severity};
+pub use gateway::{GatewayOptions, ScoreGatewayArgs};
 
 /// Keys a hardware table accepts besides its kind's parameters.
 pub const HARDWARE_KEYS: &[&str] = &["kind", "rate_hz"];
@@ -201,17 +207,9 @@ pub struct GatewayDef {
     pub kind: GatewayKind,
     /// The board's link device (an exclusive resource, like a serial hardware's port).
     pub port: PathBuf,
-    /// Highest publish rate per variable (Hz); `None`: the gateway's default.
-    pub max_rate_hz: Option<f64>,
-    /// Publish rate of variables without a rate of their own (Hz); `None`: the gateway's default.
-    pub lazy_rate_hz: Option<f64>,
-    /// Replay the last configuration onto a board that comes back empty.
-    pub restore: bool,
-    /// Pause between reconnection attempts (ms); `None`: the gateway's default.
-    pub retry_ms: Option<u64>,
-    /// Command watchdog (ms): no setpoint for this long → the commanded variables go to their
-    /// safe value; `None`: off.
-    pub watchdog_ms: Option<u64>,
+    /// What the gateway is tuned with (`max_rate_hz`, `lazy_rate_hz`, `restore`, `retry_ms`,
+    /// `watchdog_ms`), as its program takes them.
+    pub options: GatewayOptions,
 }
 
 /// The live view in Foxglove (`[view]`): `conductor view` on the manifest's domain, which the

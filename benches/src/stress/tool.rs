@@ -17,7 +17,7 @@ use clap::{Parser, Subcommand};
 use conductor_bus::{monotonic_ns, Bus, Domain};
 
 use super::{run, CommandProbe, Logger, RunOptions, StressConfig};
-use crate::launcher::LaunchOptions;
+use conductor_executor::launcher::LaunchOptions;
 
 /// `conductor-stress`.
 #[derive(Debug, Parser)]
@@ -195,7 +195,7 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            crate::note!("conductor-stress {what}: {e}");
+            conductor_executor::note!("conductor-stress {what}: {e}");
             ExitCode::FAILURE
         }
     }
@@ -204,7 +204,9 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
 /// `--avoid-cpu`: keeps this helper process off the executor's CPU.
 fn keep_off(cpu: Option<usize>) -> Result<(), String> {
     match cpu {
-        Some(c) => crate::rt::avoid_cpu(c).map_err(|p| format!("{}; {}", p.what, p.fix)),
+        Some(c) => {
+            conductor_executor::rt::avoid_cpu(c).map_err(|p| format!("{}; {}", p.what, p.fix))
+        }
         None => Ok(()),
     }
 }

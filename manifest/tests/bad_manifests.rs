@@ -2,12 +2,12 @@
 //! diagnostics (file, line, column, key, message) in its `.expected` snapshot.
 //!
 //! After an intended change of wording, regenerate the snapshots with
-//! `UPDATE_SNAPSHOTS=1 cargo test -p conductor-executor --test bad_manifests` and review the diff.
+//! `UPDATE_SNAPSHOTS=1 cargo test -p conductor-manifest --test bad_manifests` and review the diff.
 
 use std::path::Path;
 
 use conductor_devices::kinds::{KindSpec, Medium, ParamSpec, ParamType, Stage, KINDS};
-use conductor_executor::manifest::{Manifest, ManifestError};
+use conductor_manifest::{Manifest, ManifestError};
 
 /// A serial-like hardware whose `port` is an exclusive OS resource, so the corpus can show the
 /// "two subsystems on one serial device" error whatever real kinds this build has.

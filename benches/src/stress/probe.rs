@@ -180,10 +180,10 @@ fn resolve(rep: &mut ProbeReport, p: Pending, prev: Option<&StateSample>, first:
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::manifest::Manifest;
-    use crate::stages::Stages;
     use crate::stress::{manifest, StressConfig, PROBE_STATE};
     use conductor_bus::Setpoint;
+    use conductor_executor::stages::Stages;
+    use conductor_manifest::Manifest;
 
     /// The premise of the measurement: a setpoint applied before tick k's stages is written to
     /// the loopback hardware in tick k, whose own sample still shows the old value; tick k+1's

@@ -1,6 +1,6 @@
 //! The manifests shipped in deploy/ and used by the tests validate, with the structure they claim.
 
-use conductor_executor::manifest::{GatewayDef, GatewayKind, Manifest, SafeSpec};
+use conductor_manifest::{GatewayDef, GatewayKind, GatewayOptions, Manifest, SafeSpec};
 
 fn root() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -127,11 +127,13 @@ fn the_score_board_manifest_is_one_gateway_and_no_executor() {
             name: "score-rp2040".into(),
             kind: GatewayKind::Score,
             port: "/dev/score-link".into(),
-            max_rate_hz: Some(1000.0),
-            lazy_rate_hz: Some(10.0),
-            restore: true,
-            retry_ms: Some(200),
-            watchdog_ms: Some(200),
+            options: GatewayOptions {
+                max_rate_hz: Some(1000.0),
+                lazy_rate_hz: Some(10.0),
+                restore: true,
+                retry_ms: Some(200),
+                watchdog_ms: Some(200),
+            },
         }]
     );
 }
@@ -161,11 +163,8 @@ fn gateways_sit_beside_subsystems_with_defaults() {
     let names: Vec<&str> = m.gateways.iter().map(|g| g.name.as_str()).collect();
     assert_eq!(names, ["b2", "b1"]);
     let b1 = m.gateway("b1").unwrap();
-    assert_eq!(
-        (b1.max_rate_hz, b1.lazy_rate_hz, b1.restore, b1.retry_ms),
-        (None, None, true, None)
-    );
-    assert!(!m.gateway("b2").unwrap().restore);
+    assert_eq!(b1.options, GatewayOptions::default());
+    assert!(!m.gateway("b2").unwrap().options.restore);
     assert!(m.gateway("leg").is_none());
 }
 

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 
 use clap::Parser;
 use conductor_bus::{monotonic_ns, Bus, Controller, Domain, StatsSubscriber, TickWaiter};
-use conductor_executor::demo::{error_ratio, gait_rms, GAINS, GAIT};
+use conductor_examples::minihubo::{error_ratio, gait_rms, GAINS, GAIT};
 use conductor_executor::launcher::{Launch, LaunchOptions};
 use conductor_executor::process;
 

@@ -3,8 +3,8 @@
 //! undocumented). `UPDATE_DOCS=1` rewrites the generated section.
 
 use conductor_devices::kinds::KINDS;
-use conductor_executor::manifest::reference::kinds_markdown;
-use conductor_executor::manifest::{
+use conductor_manifest::reference::kinds_markdown;
+use conductor_manifest::{
     BRIDGE_KEYS, DEVICE_KEYS, GATEWAY_KEYS, HARDWARE_KEYS, PROTOCOL_KEYS, STATE_KEYS,
     SUBSYSTEM_KEYS, TOP_KEYS, VIEW_KEYS,
 };
@@ -30,7 +30,7 @@ fn the_kinds_section_is_generated_from_the_kind_table() {
     assert!(
         doc[start..end] == generated,
         "docs/manifest.md's kinds section is out of date; run \
-         `UPDATE_DOCS=1 cargo test -p conductor-executor --test docs`"
+         `UPDATE_DOCS=1 cargo test -p conductor-manifest --test docs`"
     );
     // And it really lists them all.
     for k in KINDS {

@@ -14,6 +14,7 @@
 mod logger;
 mod probe;
 mod run;
+#[cfg(feature = "cli")]
 pub mod tool;
 
 pub use logger::{parse_line, Logger, StateReport, Summary};
@@ -105,7 +106,7 @@ pub fn manifest(cfg: &StressConfig) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::manifest::Manifest;
+    use conductor_manifest::Manifest;
 
     #[test]
     fn stress_manifests_validate() {

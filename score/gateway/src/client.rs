@@ -82,15 +82,16 @@ pub enum Answer {
     Time(u64),
 }
 
-/// An open link.
-pub struct Link {
+/// The host end of one board's `score_link` serial port (a client of the board; not a
+/// `conductor_devices` link).
+pub struct BoardClient {
     port: TTYPort,
     scanner: FrameScanner<MAX_FRAME>,
     seq: u16,
     events: VecDeque<Event>,
 }
 
-impl Link {
+impl BoardClient {
     /// Opens the serial device (a PTY works as well) and drops what is already buffered.
     pub fn open(path: &Path) -> Result<Self, GatewayError> {
         let port = serialport::new(path.to_string_lossy(), 115_200)

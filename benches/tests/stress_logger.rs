@@ -1,0 +1,91 @@
+//! The stress test's external logger (`conductor-stress log`, a process of its own) sees every
+//! state of a launched manifest at its rate, without losses.
+
+use std::collections::HashMap;
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use conductor_benches::stress::parse_line;
+use conductor_bus::{Bus, Domain, RtIpc, StatsSubscriber};
+use conductor_executor::launcher::{Launch, LaunchOptions};
+use conductor_testkit::workspace;
+use iceoryx2::testing::remove_global_mgmt_segment;
+
+const STRESS: &str = env!("CARGO_BIN_EXE_conductor-stress");
+
+/// Deadline misses of a subsystem so far, from its stats (within 5 s).
+fn misses(bus: &Bus, subsystem: &str) -> u64 {
+    let mut s = StatsSubscriber::new(bus, subsystem).unwrap();
+    let end = Instant::now() + Duration::from_secs(5);
+    loop {
+        if let Some(stats) = s.latest().unwrap() {
+            return stats.misses;
+        }
+        assert!(Instant::now() < end, "no stats within 5 s");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn an_external_subscriber_sees_every_state_at_its_rate() {
+    let d = Domain::unique("rates").unwrap();
+    let manifest = workspace().join("executors/tests/manifests/two-subsystems.toml");
+    let options = LaunchOptions {
+        // This build's stress tool is its own executor.
+        executor: STRESS.into(),
+        executor_args: vec!["executor".into()],
+        domain: Some(d.name().into()),
+        quiet: true,
+        handle_signals: false,
+        ..LaunchOptions::default()
+    };
+    let launch = Launch::start(&manifest, options).unwrap();
+    let states = [
+        "arm/j0",
+        "arm/j1",
+        "arm/j2",
+        "arm/j3",
+        "arm/j4",
+        "arm/j5",
+        "sensors/a",
+        "sensors/b",
+        "sensors/c",
+    ];
+    let out = Command::new(STRESS)
+        .args(["log", "--domain", d.name(), "--seconds", "2", "--states"])
+        .arg(states.join(","))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let bus = Bus::open(&d, "test").unwrap();
+    let skipped = misses(&bus, "arm") + misses(&bus, "sensors");
+    let text = String::from_utf8(out.stdout).unwrap();
+    let rows: Vec<HashMap<String, String>> = text.lines().map(parse_line).collect();
+    assert_eq!(rows.len(), states.len(), "{text}");
+    let expected_rates = [200.0, 200.0, 200.0, 200.0, 200.0, 200.0, 250.0, 125.0, 50.0];
+    for (row, (name, rate)) in rows.iter().zip(states.iter().zip(expected_rates)) {
+        assert_eq!(row["state"], *name);
+        assert_eq!(row["rate_hz"].parse::<f64>().unwrap(), rate, "{name}");
+        assert_eq!(row["missed"], "0", "{name}: the subscriber lost samples");
+        // Samples are counted by their sample time over a 2 s window: one per period, ±1 for
+        // where the window's edges fall. A deadline the executor missed (its slot skipped,
+        // reported in its stats) publishes nothing, so it may lower the count.
+        let count: f64 = row["count"].parse().unwrap();
+        let want = rate * 2.0;
+        assert!(
+            count <= want + 1.0 && count >= want - 1.0 - skipped as f64,
+            "{name}: {count} samples in 2 s at {rate} Hz ({skipped} deadline misses): {text}"
+        );
+    }
+    drop(bus);
+    launch.stop();
+    launch.wait().unwrap();
+    // SAFETY: the domain is private to this test and no process of it is alive any more, which
+    // is the precondition of removing its node counter.
+    let _ = unsafe { remove_global_mgmt_segment::<RtIpc>(d.iceoryx2_config()) };
+    let _ = std::fs::remove_dir_all(d.root_path());
+}
