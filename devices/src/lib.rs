@@ -22,7 +22,7 @@
 //! | [`protocol`] | protocol stages: Dynamixel 2.0 and 1.0 (bundling), CAN motors (MIT, ODrive) |
 //! | [`device`] | devices: Dynamixel X-series, Dynamixel 1.0 (AX/MX), MIT-mode motor, ODrive axis |
 //! | [`sim`] | simulators speaking the real wire protocols, fault injection, pty/UDP runners |
-//! | [`kinds`] | the manifest kinds, their parameters, and the factories |
+//! | [`kinds`] | the registry of manifest kinds: each driver declares its own entry (parameters, typed builder, safe actions) |
 //! | [`lifecycle`] | bring-up, enable, trips, faults and safe-action confirmation of a device |
 
 #![warn(missing_docs)]

@@ -153,6 +153,38 @@ pub trait Hardware {
     fn shutdown(&mut self) {}
 }
 
+/// A boxed hardware is hardware: what a link built by kind holds, whatever the transport.
+impl<H: Hardware + ?Sized> Hardware for Box<H> {
+    type Word = H::Word;
+    fn transmit(&mut self, words: &[Self::Word], ctx: TickCtx) -> Result<usize, HwError> {
+        (**self).transmit(words, ctx)
+    }
+    fn receive(&mut self, out: &mut [Self::Word], ctx: TickCtx) -> Result<usize, HwError> {
+        (**self).receive(out, ctx)
+    }
+    fn rx_unconfirmed(&self) -> &[u32] {
+        (**self).rx_unconfirmed()
+    }
+    fn rx_times(&self) -> &[u64] {
+        (**self).rx_times()
+    }
+    fn condition(&self) -> BusCondition {
+        (**self).condition()
+    }
+    fn preempt(&mut self) {
+        (**self).preempt()
+    }
+    fn flushed(&self) -> bool {
+        (**self).flushed()
+    }
+    fn counters(&self) -> HwCounters {
+        (**self).counters()
+    }
+    fn shutdown(&mut self) {
+        (**self).shutdown()
+    }
+}
+
 /// Counters a protocol keeps about its bus.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct ProtocolCounters {

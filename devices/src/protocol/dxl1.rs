@@ -138,6 +138,25 @@ impl Dialect for Dxl1 {
 
 protocol_over_stage!(Dxl1Protocol);
 
+crate::choices!(Dxl1ReadMode { Bulk = "bulk", Single = "single" });
+
+/// The `dynamixel1` protocol kind.
+pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
+    kind: "dynamixel1",
+    params: &[
+        crate::kinds::ParamSpec::choice::<Dxl1ReadMode>("read", "bulk", "one BULK READ for all servos (MX series) or one READ per bus window, round robin (AX series)"),
+        crate::kinds::RETURN_DELAY_US,
+        crate::kinds::TIMEOUT_US,
+    ],
+    doc: "ROBOTIS Dynamixel Protocol 1.0 (AX/MX/RX): writes become SYNC WRITEs, reads one BULK \
+          READ (or single READs in turn).",
+    build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Bytes(|p, hw, cap| {
+        let timing = super::register_stage::timing(p, hw.baud())?;
+        let stage = Dxl1Protocol::new(timing, p.choice("read")?, cap.devices, cap.in_flight);
+        hw.link(stage, cap)
+    })),
+};
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -231,6 +231,26 @@ impl Dialect for Dxl2 {
 
 protocol_over_stage!(Dxl2Protocol);
 
+crate::choices!(Dxl2ReadMode { Sync = "sync", Fast = "fast_sync" });
+
+/// The `dynamixel2` protocol kind.
+pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
+    kind: "dynamixel2",
+    params: &[
+        crate::kinds::ParamSpec::choice::<Dxl2ReadMode>("read", "sync", "one SYNC READ (a status packet per servo) or one FAST SYNC READ (one combined packet, X430/540 firmware ≥ 45) per transaction; servos reading different spans get a (FAST) BULK READ"),
+        crate::kinds::RETURN_DELAY_US,
+        crate::kinds::TIMEOUT_US,
+    ],
+    doc: "ROBOTIS Dynamixel Protocol 2.0: a tick's writes become one SYNC WRITE per register, its \
+          reads one SYNC READ / FAST SYNC READ; status packets are matched to the requests by ID; \
+          missing replies make the states stale. Bus timing comes from the hardware's `baud`.",
+    build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Bytes(|p, hw, cap| {
+        let timing = super::register_stage::timing(p, hw.baud())?;
+        let stage = Dxl2Protocol::new(timing, p.choice("read")?, cap.devices, cap.in_flight);
+        hw.link(stage, cap)
+    })),
+};
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -11,14 +11,15 @@
 //! queues, coalescing, transactions, deadlines, reply matching); each protocol adds only its
 //! dialect: the encoders, the read instruction, the scanner and how its error byte reads.
 
-mod can;
-mod dxl1;
-mod dxl2;
+pub(crate) mod can;
+pub(crate) mod dxl1;
+pub(crate) mod dxl2;
 mod register;
 mod register_stage;
 
 pub use can::{
-    mit_limits, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError, MIT_MODELS,
+    mit_limits, mit_model, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError,
+    MIT_MODELS, MIT_MODEL_NAMES,
 };
 pub use dxl1::{Dxl1Protocol, Dxl1ReadMode};
 pub use dxl2::{fast_read_fits, fast_reply_len, Dxl2Protocol, Dxl2ReadMode};

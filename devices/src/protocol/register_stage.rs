@@ -285,3 +285,18 @@ macro_rules! protocol_over_stage {
     };
 }
 pub(crate) use protocol_over_stage;
+
+/// The bus timing of a Dynamixel protocol kind: its `return_delay_us` and `timeout_us`
+/// parameters at the hardware's line speed.
+pub(crate) fn timing(
+    p: &crate::kinds::Params,
+    baud: u32,
+) -> Result<Timing, crate::kinds::BuildError> {
+    let (delay_us, timeout_us): (u64, u64) =
+        (p.int_as("return_delay_us")?, p.int_as("timeout_us")?);
+    Ok(Timing {
+        baud,
+        return_delay_ns: delay_us * 1000,
+        timeout_ns: timeout_us * 1000,
+    })
+}
