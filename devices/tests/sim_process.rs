@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use conductor_devices::device::{mit_channel, x_channel, DxlXConfig, DynamixelX, MitMotor};
 use conductor_devices::hw::{SerialHardware, SerialOptions, SlcanHardware, SlcanOptions};
-use conductor_devices::protocol::{
+use conductor_devices::protocol_stage::{
     mit_limits, CanMotorProtocol, Dxl2Protocol, Dxl2ReadMode, Timing,
 };
 use conductor_devices::{

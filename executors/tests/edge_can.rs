@@ -14,7 +14,7 @@ mod support;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Controller, Domain, StateSample, StatsSubscriber};
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::runner::{run_slcan, Endpoint, Pty, Running};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;

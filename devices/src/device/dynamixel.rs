@@ -3,10 +3,10 @@
 
 use std::f64::consts::PI;
 
+use super::control_table::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};
 use super::reg_device::RegDevice;
-use super::register::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};
+use crate::component::SafeAction;
 use crate::message::Credential;
-use crate::stage::SafeAction;
 
 /// X-series control table addresses (XM430, protocols.md §1.9).
 pub mod x_table {

@@ -19,12 +19,12 @@
 //! ranges are set in the motor's own menu): bring-up checks that the motor answers. A fault code
 //! (8-byte replies of newer firmware) trips it.
 
+use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
     DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, ROUND_TIMEOUT_NS,
 };
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
-use crate::stage::{Channel, Device, SafeAction, TickCtx};
 
 /// Channel indices of [`MitMotor`].
 pub mod mit_channel {

@@ -23,13 +23,13 @@ use std::f64::consts::TAU;
 
 use conductor_protocols::odrive_can::{axis_state, control_mode, input_mode, CmdId, Message};
 
+use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
     DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, PROBE_TRIES,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
-use crate::protocol::odrive_get;
+use crate::protocol_stage::odrive_get;
 use crate::queue::Bounded;
-use crate::stage::{Channel, Device, SafeAction, TickCtx};
 
 /// Channel indices of [`OdriveAxis`].
 pub mod odrive_channel {

@@ -6,7 +6,7 @@ use std::time::Duration;
 use serialport::{DataBits, FlowControl, Parity, SerialPort, StopBits, TTYPort};
 
 use super::fd;
-use crate::stage::{Hardware, HwError, TickCtx};
+use crate::component::{Hardware, HwError, TickCtx};
 
 /// How to open a serial port.
 #[derive(Debug, Clone, PartialEq, Eq)]

@@ -26,8 +26,8 @@ use conductor_protocols::slcan::{
     MAX_FRAME_LINE,
 };
 
+use crate::component::{Hardware, HwCounters, HwError, TickCtx};
 use crate::queue::Bounded;
-use crate::stage::{Hardware, HwCounters, HwError, TickCtx};
 
 /// How to talk to the adapter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -18,7 +18,7 @@ use socketcan::{CanSocket, EmbeddedFrame, Socket, SocketOptions};
 use nix::errno::Errno;
 use nix::time::{clock_gettime, ClockId};
 
-use crate::stage::{BusCondition, ControllerState, Hardware, HwCounters, HwError, TickCtx};
+use crate::component::{BusCondition, ControllerState, Hardware, HwCounters, HwError, TickCtx};
 
 /// Converts to socketcan's frame type (for transmission).
 pub fn to_socketcan(f: &CanFrame) -> socketcan::CanFrame {

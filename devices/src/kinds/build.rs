@@ -13,11 +13,11 @@ use conductor_protocols::can::CanFrame;
 use super::choice::UnknownChoice;
 use super::spec::{Capacity, Medium, Params};
 use super::Role;
+use crate::component::{Device, Hardware, Protocol};
 use crate::link::{Link, LinkOf, Opener};
 use crate::message::Credential;
-use crate::protocol::ModelTableError;
+use crate::protocol_stage::ModelTableError;
 use crate::sim::SimWord;
-use crate::stage::{Device, Hardware, Protocol};
 
 /// Failure to build a component from validated parameters (opening a port, ...).
 #[derive(Debug, thiserror::Error)]

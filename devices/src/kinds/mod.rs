@@ -25,9 +25,9 @@ pub use choice::{Choice, UnknownChoice};
 pub use common::{BAUD_DOC, RETURN_DELAY_US, TIMEOUT_US};
 pub use spec::{Capacity, Medium, ParamDefault, ParamSpec, ParamType, ParamValue, Params};
 
+use crate::component::{Device, SafeAction};
 use crate::link::Link;
 use crate::message::Credential;
-use crate::stage::{Device, SafeAction};
 
 /// What a kind is: which of the three components of a link it builds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -132,9 +132,9 @@ pub const KINDS: &[KindSpec] = &[
     crate::hw::socketcan::KIND,
     crate::hw::slcan::KIND,
     crate::sim::hardware::CAN_SIM,
-    crate::protocol::dxl2::KIND,
-    crate::protocol::dxl1::KIND,
-    crate::protocol::can::KIND,
+    crate::protocol_stage::dxl2::KIND,
+    crate::protocol_stage::dxl1::KIND,
+    crate::protocol_stage::can_motors::KIND,
     crate::device::dynamixel::DYNAMIXEL_X,
     crate::device::dynamixel::DYNAMIXEL1,
     crate::device::mit::KIND,

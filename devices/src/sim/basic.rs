@@ -4,12 +4,12 @@
 //! They speak [`SimWord`]s through the [`SimProtocol`], so the executor runs every stage (device
 //! tagging, protocol bundling and reply matching, hardware queues) exactly as for a real bus.
 
+use crate::component::{
+    Channel, Device, Hardware, HwError, Protocol, ProtocolCounters, SafeAction, TickCtx,
+};
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::outstanding::{Outstanding, Pending};
 use crate::queue::Bounded;
-use crate::stage::{
-    Channel, Device, Hardware, HwError, Protocol, ProtocolCounters, SafeAction, TickCtx,
-};
 
 /// The unit the simulated bus carries.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -11,7 +11,7 @@ use super::can_motors::{CanNode, NodeSnapshot};
 use super::dxl::{DxlBusSim, DxlSimConfig, DxlSimStats};
 use super::fault::{FaultConfig, FaultInjector, FaultRecord};
 use super::slcan_adapter::{SlcanAdapterSim, SlcanSimStats};
-use crate::stage::{Hardware, HwError, TickCtx};
+use crate::component::{Hardware, HwError, TickCtx};
 
 /// What the host sent in one `transmit`, as the simulator saw it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -409,7 +409,7 @@ pub const CAN_SIM: KindSpec = KindSpec {
         ParamSpec::names(
             "model",
             Some("ak80-9"),
-            crate::protocol::MIT_MODEL_NAMES,
+            crate::protocol_stage::MIT_MODEL_NAMES,
             "MIT motor model (ranges)",
         ),
         ParamSpec::int(
@@ -435,7 +435,7 @@ pub const CAN_SIM: KindSpec = KindSpec {
 };
 
 fn open_can_sim(p: &Params, _: Capacity) -> Result<OpenedHardware<CanFrame>, BuildError> {
-    let limits = crate::protocol::mit_model(p, "model")?;
+    let limits = crate::protocol_stage::mit_model(p, "model")?;
     let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
     for id in id_list(p, "mit")? {
         nodes.push(Box::new(super::can_motors::MitMotorSim::new(

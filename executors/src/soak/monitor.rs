@@ -21,7 +21,7 @@ use std::time::Duration;
 use conductor_bus::{
     monotonic_ns, status, Bus, Domain, ExecutorStats, StateSample, StateSubscriber, StatsSubscriber,
 };
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_protocols::mit_can::{decode_command, MotorCommand};
 use embedded_can::Frame;
 

@@ -8,10 +8,10 @@ use conductor_protocols::mit_can::{self, Command, Limits, Model, SpecialCommand}
 use conductor_protocols::odrive_can::{self, CmdId, Message};
 use embedded_can::{Frame, Id, StandardId};
 
+use crate::component::{Protocol, ProtocolCounters, TickCtx};
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request};
 use crate::outstanding::{Outstanding, Pending};
 use crate::queue::Bounded;
-use crate::stage::{Protocol, ProtocolCounters, TickCtx};
 
 /// The MIT-mode model names the manifest accepts, with their ranges.
 pub const MIT_MODELS: &[(&str, Model)] = &[

@@ -8,11 +8,11 @@ use conductor_protocols::dynamixel2::{
 
 use conductor_protocols::scan::ScanStats;
 
-use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
-use super::register_stage::{protocol_over_stage, Dialect, ReadTxn, Stage};
+use super::register_bus::{protocol_over_register_bus, Dialect, ReadTxn, RegisterBus};
+use super::transactions::{Core, Entry, ReadShape, StatusErr, Timing};
+use crate::component::Protocol;
 use crate::message::Reply;
 use crate::queue::Bounded;
-use crate::stage::Protocol;
 
 /// How the stage reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,7 +32,7 @@ const MAX_RECEIVED: usize = MAX_PACKET + MAX_PACKET / 3 + 1;
 
 /// Dynamixel 2.0 protocol stage. Word = byte.
 pub struct Dxl2Protocol {
-    stage: Stage<Dxl2, MAX_RECEIVED>,
+    stage: RegisterBus<Dxl2, MAX_RECEIVED>,
 }
 
 impl std::fmt::Debug for Dxl2Protocol {
@@ -64,7 +64,7 @@ impl Dxl2Protocol {
             lens: Vec::with_capacity(devices),
         };
         Self {
-            stage: Stage::new(
+            stage: RegisterBus::new(
                 dialect,
                 timing,
                 dxl::MAX_DEVICE_ID,
@@ -229,7 +229,7 @@ impl Dialect for Dxl2 {
     }
 }
 
-protocol_over_stage!(Dxl2Protocol);
+protocol_over_register_bus!(Dxl2Protocol);
 
 crate::choices!(Dxl2ReadMode { Sync = "sync", Fast = "fast_sync" });
 
@@ -245,7 +245,7 @@ pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
           reads one SYNC READ / FAST SYNC READ; status packets are matched to the requests by ID; \
           missing replies make the states stale. Bus timing comes from the hardware's `baud`.",
     build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Bytes(|p, hw, cap| {
-        let timing = super::register_stage::timing(p, hw.baud())?;
+        let timing = super::register_bus::timing(p, hw.baud())?;
         let stage = Dxl2Protocol::new(timing, p.choice("read")?, cap.devices, cap.in_flight);
         hw.link(stage, cap)
     })),
@@ -254,8 +254,8 @@ pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::component::TickCtx;
     use crate::message::{Credential, Op, ReplyData, Request};
-    use crate::stage::TickCtx;
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
         Request::new(Credential::id(id), op, ctx(tick))

@@ -1,5 +1,5 @@
-//! The three communication stages (thesis §2.4) as traits, and [`Link`], the pairing of a
-//! protocol with the hardware it runs on.
+//! The three components of a link (thesis §2.4) as traits: [`Hardware`], [`Protocol`] (a
+//! protocol stage) and [`Device`], with the types they exchange (see docs/vocabulary.md).
 //!
 //! The executor calls every method here on its real-time thread: implementations must not
 //! block, allocate or lock. Buffers are sized when a component is built.
