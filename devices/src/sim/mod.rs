@@ -19,5 +19,6 @@ pub mod hardware;
 pub mod runner;
 pub mod slcan_adapter;
 pub mod socketcan_bus;
+mod worker;
 
 pub use basic::{LoopbackHardware, SimDevice, SimKind, SimProtocol, SimWord, SineHardware};
