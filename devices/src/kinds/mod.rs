@@ -401,40 +401,47 @@ mod tests {
         ));
     }
 
-    #[test]
-    fn os_resources_fail_with_a_typed_error_not_a_panic() {
-        let s = |v: &str| ParamValue::Str(v.into());
-        let pp = params(Role::Protocol, "dynamixel2", &[]);
+    /// Builds `protocol` on `hardware` whose `key` names an OS resource that does not exist.
+    fn open_missing(protocol: &str, hardware: &str, key: &str, value: &str) -> BuildError {
+        let pp = params(Role::Protocol, protocol, &[]);
         let hp = params(
             Role::Hardware,
-            "serial",
-            &[("port", s("/dev/conductor-nonexistent"))],
+            hardware,
+            &[(key, ParamValue::Str(value.into()))],
         );
-        match build_link("dynamixel2", &pp, "serial", &hp, cap()) {
-            Err(
-                e @ BuildError::Open {
+        match build_link(protocol, &pp, hardware, &hp, cap()) {
+            Err(e) => e,
+            Ok(_) => panic!("{hardware} {value} opened"),
+        }
+    }
+
+    #[test]
+    fn os_resources_fail_with_a_typed_error_not_a_panic() {
+        let e = open_missing("dynamixel2", "serial", "port", "/dev/conductor-nonexistent");
+        assert!(
+            matches!(
+                &e,
+                BuildError::Open {
                     source: OpenError::Serial(_),
                     ..
-                },
-            ) => {
-                assert!(e.to_string().contains("/dev/conductor-nonexistent"), "{e}");
-                assert!(std::error::Error::source(&e).is_some());
-            }
-            other => panic!("{:?}", other.err()),
+                }
+            ),
+            "{e:?}"
+        );
+        assert!(e.to_string().contains("/dev/conductor-nonexistent"), "{e}");
+        assert!(std::error::Error::source(&e).is_some());
+        match open_missing("can_motors", "socketcan", "interface", "conductor-none0") {
+            BuildError::Open {
+                resource,
+                source: OpenError::Io(_),
+            } => assert_eq!(resource, "conductor-none0"),
+            other => panic!("{other:?}"),
         }
-        let pp = params(Role::Protocol, "can_motors", &[]);
         let hp = params(
             Role::Hardware,
             "socketcan",
-            &[("interface", s("conductor-none0"))],
+            &[("interface", ParamValue::Str("conductor-none0".into()))],
         );
-        match build_link("can_motors", &pp, "socketcan", &hp, cap()) {
-            Err(BuildError::Open {
-                resource,
-                source: OpenError::Io(_),
-            }) => assert_eq!(resource, "conductor-none0"),
-            other => panic!("{:?}", other.err()),
-        }
         // A byte protocol on CAN hardware is refused before anything is opened.
         let pp = params(Role::Protocol, "dynamixel2", &[]);
         assert!(matches!(
