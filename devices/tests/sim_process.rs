@@ -394,7 +394,6 @@ fn dynamixel_process_commands() {
 /// behaviours (no acks, latency, stall, raw bytes to the host).
 #[test]
 fn slcan_process_commands() {
-
     // No cyclic heartbeat: the host reads exact byte streams below.
     let mut sim = Sim::spawn(&[
         "slcan",
