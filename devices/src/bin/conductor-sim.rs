@@ -309,19 +309,7 @@ fn dxl_stats(sim: &DxlBusSim) -> String {
 
 fn slcan_stats(a: &SlcanAdapterSim) -> String {
     let s = a.stats();
-    let nodes = a
-        .nodes()
-        .iter()
-        .map(|n| {
-            let s = n.snapshot();
-            format!(
-                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}, \
-                 \"fault\": {}, \"ignored\": {}}}",
-                s.id, s.position, s.enabled, s.frames_in, s.fault, s.ignored
-            )
-        })
-        .collect::<Vec<_>>()
-        .join(", ");
+    let nodes = node_stats(a.nodes());
     format!(
         "{{\"bytes_in\": {}, \"commands\": {}, \"frames_from_host\": {}, \"frames_to_host\": {}, \
          \"nacks\": {}, \"bytes_out\": {}, \"open\": {}, \"nodes\": [{}]}}",

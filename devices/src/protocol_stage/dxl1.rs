@@ -151,9 +151,7 @@ pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
     doc: "ROBOTIS Dynamixel Protocol 1.0 (AX/MX/RX): writes become SYNC WRITEs, reads one BULK \
           READ (or single READs in turn).",
     build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Bytes(|p, hw, cap| {
-        let timing = super::register_bus::timing(p, hw.baud())?;
-        let stage = Dxl1Protocol::new(timing, p.choice("read")?, cap.devices, cap.in_flight);
-        hw.link(stage, cap)
+        super::register_bus::link_kind(p, hw, cap, Dxl1Protocol::new)
     })),
 };
 

@@ -245,9 +245,7 @@ pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
           reads one SYNC READ / FAST SYNC READ; status packets are matched to the requests by ID; \
           missing replies make the states stale. Bus timing comes from the hardware's `baud`.",
     build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Bytes(|p, hw, cap| {
-        let timing = super::register_bus::timing(p, hw.baud())?;
-        let stage = Dxl2Protocol::new(timing, p.choice("read")?, cap.devices, cap.in_flight);
-        hw.link(stage, cap)
+        super::register_bus::link_kind(p, hw, cap, Dxl2Protocol::new)
     })),
 };
 

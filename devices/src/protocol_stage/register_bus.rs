@@ -286,17 +286,28 @@ macro_rules! protocol_over_register_bus {
 }
 pub(crate) use protocol_over_register_bus;
 
-/// The bus timing of a Dynamixel protocol kind: its `return_delay_us` and `timeout_us`
-/// parameters at the hardware's line speed.
-pub(crate) fn timing(
+/// Builds a Dynamixel protocol kind's stage with `new` (its bus timing from the kind's
+/// `return_delay_us` and `timeout_us` at the hardware's line speed, its `read` mode) and binds
+/// it to the hardware.
+pub(crate) fn link_kind<S, M>(
     p: &crate::kinds::Params,
-    baud: u32,
-) -> Result<Timing, crate::kinds::BuildError> {
+    hw: crate::kinds::OpenedHardware<u8>,
+    cap: crate::kinds::Capacity,
+    new: fn(Timing, M, usize, usize) -> S,
+) -> Result<Box<dyn crate::Link>, crate::kinds::BuildError>
+where
+    S: crate::component::Protocol<Word = u8> + 'static,
+    M: crate::kinds::Choice,
+{
     let (delay_us, timeout_us): (u64, u64) =
         (p.int_as("return_delay_us")?, p.int_as("timeout_us")?);
-    Ok(Timing {
-        baud,
+    let timing = Timing {
+        baud: hw.baud(),
         return_delay_ns: delay_us * 1000,
         timeout_ns: timeout_us * 1000,
-    })
+    };
+    hw.link(
+        new(timing, p.choice("read")?, cap.devices, cap.in_flight),
+        cap,
+    )
 }
