@@ -39,7 +39,7 @@
 //! * **Simulated** protocols (`sim`) have no wire; unknown kinds no model: no load.
 
 use conductor_devices::device::{Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX, RegChannel};
-use conductor_devices::protocol_stage;
+use conductor_devices::protocol_stage::{self, Dxl1ReadMode, Dxl2ReadMode};
 use conductor_devices::Device as _;
 
 use super::Subsystem;
@@ -445,11 +445,10 @@ impl Subsystem {
                 .filter(|v| *v > 0)
                 .unwrap_or(DEFAULT_SPEED)
         };
-        let read = p.params.str("read").unwrap_or("");
         let (proto, wire) = match p.kind.as_str() {
             "dynamixel2" => (
                 Proto::Dxl2 {
-                    fast: read == "fast_sync",
+                    fast: p.params.choice("read").ok() == Some(Dxl2ReadMode::Fast),
                 },
                 Wire::Uart {
                     baud: speed("baud"),
@@ -457,7 +456,7 @@ impl Subsystem {
             ),
             "dynamixel1" => (
                 Proto::Dxl1 {
-                    single: read == "single",
+                    single: p.params.choice("read").ok() == Some(Dxl1ReadMode::Single),
                 },
                 Wire::Uart {
                     baud: speed("baud"),
