@@ -15,6 +15,7 @@
 //! by the watchdog or a fault, re-enabled through `enable`.
 
 mod control_table;
+pub mod cubemars_ak;
 pub(crate) mod dynamixel;
 pub(crate) mod mit;
 pub(crate) mod odrive;

@@ -138,6 +138,7 @@ pub const KINDS: &[KindSpec] = &[
     crate::device::dynamixel::DYNAMIXEL_X,
     crate::device::dynamixel::DYNAMIXEL1,
     crate::device::mit::KIND,
+    crate::device::cubemars_ak::KIND,
     crate::device::odrive::KIND,
     crate::sim::basic::SINE,
     crate::sim::basic::LOOPBACK,
