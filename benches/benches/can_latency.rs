@@ -23,7 +23,7 @@ use conductor_bus::monotonic_ns;
 use conductor_devices::hw::{
     SerialHardware, SerialOptions, SlcanHardware, SlcanOptions, SocketCanHardware,
 };
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim};
 use conductor_devices::sim::runner::{run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;

@@ -30,7 +30,7 @@ use std::time::Duration;
 mod dxl_reads;
 
 use conductor_devices::device::{x_channel, DxlXConfig, DynamixelX};
-use conductor_devices::protocol::{Dxl2Protocol, Dxl2ReadMode, Timing};
+use conductor_devices::protocol_stage::{Dxl2Protocol, Dxl2ReadMode, Timing};
 use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
 use conductor_devices::{Bounded, Credential, Device, Protocol, Reply, Request, TickCtx, Update};
 use criterion::{black_box, Criterion};

@@ -8,7 +8,7 @@
 mod dxl_reads;
 
 use conductor_devices::device::Layout;
-use conductor_devices::protocol::Dxl2ReadMode;
+use conductor_devices::protocol_stage::Dxl2ReadMode;
 use conductor_protocols::dynamixel2 as dxl;
 use dxl_reads::{measure, sdk_minimum, sdk_reads, Reading, Setup, REGISTERS};
 

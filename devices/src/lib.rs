@@ -19,14 +19,15 @@
 //! | Module | Contents |
 //! |---|---|
 //! | [`hw`] | transports: serial, UDP, SocketCAN, SLCAN, in-memory byte pipe and CAN bus |
-//! | [`protocol`] | protocol stages: Dynamixel 2.0 and 1.0 (bundling), CAN motors (MIT, ODrive) |
+//! | [`protocol_stage`] | protocol stages: Dynamixel 2.0 and 1.0 (bundling), CAN motors (MIT, ODrive) |
 //! | [`device`] | devices: Dynamixel X-series, Dynamixel 1.0 (AX/MX), MIT-mode motor, ODrive axis |
 //! | [`sim`] | simulators speaking the real wire protocols, fault injection, pty/UDP runners |
-//! | [`kinds`] | the manifest kinds, their parameters, and the factories |
+//! | [`kinds`] | the registry of manifest kinds: each driver declares its own entry (parameters, typed builder, safe actions) |
 //! | [`lifecycle`] | bring-up, enable, trips, faults and safe-action confirmation of a device |
 
 #![warn(missing_docs)]
 
+mod component;
 pub mod device;
 pub mod hw;
 pub mod kinds;
@@ -34,18 +35,17 @@ pub mod lifecycle;
 mod link;
 mod message;
 mod outstanding;
-pub mod protocol;
+pub mod protocol_stage;
 mod queue;
 pub mod sim;
-mod stage;
 
+pub use component::{
+    BusCondition, Channel, ControllerState, Device, Hardware, HwCounters, HwError, Protocol,
+    ProtocolCounters, SafeAction, TickCtx,
+};
 pub use lifecycle::{DeviceStatus, Failure, Phase, SafeProgress, Startup};
 pub use link::{Link, LinkCounters, LinkOf, LinkState, Opener};
 pub use message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 pub use nix::errno::Errno;
 pub use outstanding::{Outstanding, Pending};
 pub use queue::{Bounded, Full};
-pub use stage::{
-    BusCondition, Channel, ControllerState, Device, Hardware, HwCounters, HwError, Protocol,
-    ProtocolCounters, SafeAction, TickCtx,
-};

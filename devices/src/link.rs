@@ -32,11 +32,11 @@ use std::time::Duration;
 
 use nix::errno::Errno;
 
-use crate::message::{Reply, Request};
-use crate::queue::Bounded;
-use crate::stage::{
+use crate::component::{
     BusCondition, Hardware, HwCounters, HwError, Protocol, ProtocolCounters, TickCtx,
 };
+use crate::message::{Reply, Request};
+use crate::queue::Bounded;
 
 /// Whether a link's bus is there.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -1,7 +1,7 @@
 //! What flows between the stages: [`Request`]s downstream, [`Reply`]s upstream, and the
 //! [`Update`]s a device hands back to the state stage.
 
-use crate::stage::TickCtx;
+use crate::component::TickCtx;
 
 /// The identity of a device on its bus, which the Device stage tags on every request and the
 /// Protocol stage reconstructs from every reply (the thesis' "credential").

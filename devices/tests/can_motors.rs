@@ -3,7 +3,7 @@
 
 use conductor_devices::device::{mit_channel, odrive_channel, MitMotor, OdriveAxis, OdriveMode};
 use conductor_devices::hw::{SlcanHardware, SlcanOptions};
-use conductor_devices::protocol::{mit_limits, CanMotorProtocol};
+use conductor_devices::protocol_stage::{mit_limits, CanMotorProtocol};
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::hardware::{CanSimHardware, SlcanSimPort};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;

@@ -3,7 +3,7 @@
 //! Enter on a fault; an ODrive axis with an error stays IDLE until Clear_Errors, and keeps an
 //! input written while IDLE. Sans-IO: frames are fed with explicit times.
 
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_protocols::can::CanFrame;
 use conductor_protocols::mit_can::{self, Command, Limits, Reply, SpecialCommand};

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use std::f64::consts::PI;
 
 use conductor_devices::device::{x_channel, DxlXConfig, DynamixelX};
-use conductor_devices::protocol::{Dxl2Protocol, Dxl2ReadMode, Timing};
+use conductor_devices::protocol_stage::{Dxl2Protocol, Dxl2ReadMode, Timing};
 use conductor_devices::sim::dxl::DxlSimConfig;
 use conductor_devices::sim::fault::{FaultConfig, Rng};
 use conductor_devices::sim::hardware::{DxlSimHardware, ReplyRecord};

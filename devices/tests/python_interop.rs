@@ -6,7 +6,7 @@ use conductor_testkit::python;
 use std::path::PathBuf;
 use std::process::Command;
 
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::dxl::DxlSimConfig;
 use conductor_devices::sim::fault::FaultConfig;

@@ -11,7 +11,10 @@ use std::os::unix::io::AsRawFd;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use conductor_devices::protocol::mit_limits;
+mod common;
+use common::read_lines;
+
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim};
 use conductor_devices::sim::dxl::DxlSimConfig;
 use conductor_devices::sim::fault::FaultConfig;
@@ -157,17 +160,6 @@ fn replug_needs_a_link() {
 fn slcan_line(port: &mut TTYPort, cmd: &str) -> String {
     port.write_all(cmd.as_bytes()).unwrap();
     read_lines(port, 1)
-}
-
-/// Reads until `n` CR- or BEL-terminated lines have arrived.
-fn read_lines(port: &mut TTYPort, n: usize) -> String {
-    let mut got = Vec::new();
-    let mut buf = [0u8; 256];
-    while got.iter().filter(|&&b| b == b'\r' || b == 7).count() < n {
-        let k = port.read(&mut buf).unwrap();
-        got.extend_from_slice(&buf[..k]);
-    }
-    String::from_utf8(got).unwrap()
 }
 
 #[test]

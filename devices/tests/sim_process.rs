@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use conductor_devices::device::{mit_channel, x_channel, DxlXConfig, DynamixelX, MitMotor};
 use conductor_devices::hw::{SerialHardware, SerialOptions, SlcanHardware, SlcanOptions};
-use conductor_devices::protocol::{
+use conductor_devices::protocol_stage::{
     mit_limits, CanMotorProtocol, Dxl2Protocol, Dxl2ReadMode, Timing,
 };
 use conductor_devices::{
@@ -394,8 +394,6 @@ fn dynamixel_process_commands() {
 /// behaviours (no acks, latency, stall, raw bytes to the host).
 #[test]
 fn slcan_process_commands() {
-    use std::io::Read;
-
     // No cyclic heartbeat: the host reads exact byte streams below.
     let mut sim = Sim::spawn(&[
         "slcan",
@@ -427,16 +425,7 @@ fn slcan_process_commands() {
         .timeout(Duration::from_secs(2))
         .open_native()
         .unwrap();
-    // Reads until `n` CR- or BEL-terminated lines have arrived.
-    let read_until = |port: &mut serialport::TTYPort, n: usize| {
-        let mut got = Vec::new();
-        let mut buf = [0u8; 256];
-        while got.iter().filter(|&&b| b == b'\r' || b == 7).count() < n {
-            let k = port.read(&mut buf).unwrap();
-            got.extend_from_slice(&buf[..k]);
-        }
-        String::from_utf8(got).unwrap()
-    };
+    let read_until = common::read_lines;
     assert_eq!(sim.cmd("inject 74 30 30 30 30 0D"), "ok");
     assert_eq!(read_until(&mut port, 1), "t0000\r");
     assert_eq!(sim.cmd("acks off"), "ok");

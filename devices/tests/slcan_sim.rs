@@ -2,7 +2,7 @@
 //! with a backlog, no TX acks, raw bytes to the host, listen-only, unplugging. Sans-IO: bytes
 //! are fed and polled with explicit times.
 
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_protocols::slcan::Dialect;

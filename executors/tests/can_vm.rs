@@ -28,7 +28,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Controller, Domain, StatsSubscriber};
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::runner::{run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
@@ -365,7 +365,8 @@ fn odrive_from_host(f: &Logged, node: u8) -> bool {
     let cmd = (f.id & 0x1F) as u8;
     f.remote
         || !(cmd == CmdId::Heartbeat as u8
-            || conductor_devices::protocol::odrive_get(CmdId::from_code(cmd).unwrap()).is_some())
+            || conductor_devices::protocol_stage::odrive_get(CmdId::from_code(cmd).unwrap())
+                .is_some())
 }
 
 fn odrive_state_request(f: &Logged) -> Option<u32> {

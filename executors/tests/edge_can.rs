@@ -8,16 +8,19 @@
 //! from before the trip; a motor fault trips it; garbage lines publish nothing; after the
 //! adapter stalls, every sample keeps its true sample time; an adapter that never acknowledges
 //! frames keeps one frame per motor per tick; the adapter unplugged and plugged back resumes.
+//! The `cubemars_ak` kind runs with its model's ranges, as the simulated motor does.
 
 mod support;
 
 use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Controller, Domain, StateSample, StatsSubscriber};
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::device::cubemars_ak::AkModel;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::runner::{run_slcan, Endpoint, Pty, Running};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
+use conductor_protocols::mit_can::{decode_command, Limits, MotorCommand, SpecialCommand};
 use conductor_protocols::slcan::Dialect;
 use embedded_can::Frame;
 use support::edge::{send, Exec, Watch};
@@ -25,15 +28,21 @@ use support::{eventually, temp_manifest};
 
 /// An adapter with MIT motors `mit` (8-byte replies with `long`) and ODrive axes `odrive`.
 fn adapter(tag: &str, mit: &[u8], long: bool, odrive: &[u8]) -> (Running<SlcanAdapterSim>, String) {
+    adapter_of(tag, mit_limits("ak80-9").unwrap(), mit, long, odrive)
+}
+
+/// [`adapter`] with MIT motors of ranges `limits`.
+fn adapter_of(
+    tag: &str,
+    limits: Limits,
+    mit: &[u8],
+    long: bool,
+    odrive: &[u8],
+) -> (Running<SlcanAdapterSim>, String) {
     let link = std::env::temp_dir().join(format!("conductor-edge-{tag}-{}", std::process::id()));
     let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
     for &id in mit {
-        nodes.push(Box::new(MitMotorSim::new(
-            id,
-            mit_limits("ak80-9").unwrap(),
-            0,
-            long,
-        )));
+        nodes.push(Box::new(MitMotorSim::new(id, limits, 0, long)));
     }
     for &n in odrive {
         nodes.push(Box::new(OdriveAxisSim::new(n, 100, 0)));
@@ -480,4 +489,89 @@ fn damp_keeps_motor_mode_with_no_stiffness_after_a_trip() {
         .iter()
         .any(|l| l.contains("(1 confirmed on the wire)")));
     assert!(node(&sim, 0).enabled, "damping after the stop, as declared");
+}
+
+/// The host's frames to MIT motor `id`, in order.
+fn frames_to(sim: &Running<SlcanAdapterSim>, id: u16) -> Vec<Vec<u8>> {
+    let want = embedded_can::Id::Standard(embedded_can::StandardId::new(id).unwrap());
+    sim.sim()
+        .log()
+        .iter()
+        .filter(|(host, f)| *host && f.id() == want)
+        .map(|(_, f)| f.data().to_vec())
+        .collect()
+}
+
+/// The `cubemars_ak` kind, an AK70-10 (±25 N·m, where the default AK80-9 has ±18), against a
+/// simulated motor with the AK70-10's ranges: enabled from where it is, a position setpoint
+/// reached, a feed-forward beyond the model's torque range sent as the model's maximum, and
+/// the stop confirmed on the wire.
+#[test]
+fn a_cubemars_ak70_10_reaches_its_setpoint_is_bounded_by_its_model_and_stops_on_the_wire() {
+    let model = AkModel::Ak70_10;
+    let limits = model.limits();
+    let (sim, port) = adapter_of("ak70", limits, &[1], false, &[]);
+    let text = manifest(&port, 1, "", true)
+        .replace(
+            "kind = \"mit_motor\"",
+            "kind = \"cubemars_ak\"\nmodel = \"ak70-10\"",
+        )
+        .replace(
+            "kind = \"can_motors\"",
+            "kind = \"can_motors\"\nmodel = \"ak70-10\"",
+        );
+    let (mut exec, d) = start("ak70", &text);
+    assert!(node(&sim, 0).enabled, "in motor mode");
+    assert_eq!(node(&sim, 0).ignored, 0, "no command before enter");
+    exec.wait_log(5, "is enabled: CubeMars AK70-10");
+
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    // A position setpoint, reached.
+    eventually(10, "at 0.5 rad", || {
+        send(&mut ctl, &[("leg/p1", 0.5)]);
+        std::thread::sleep(Duration::from_millis(20));
+        ((node(&sim, 0).position - 0.5).abs() < 0.02).then_some(())
+    });
+    // The torque feed-forward of the last command on the wire after writing `t` for 200 ms.
+    let mut torque_sent = |t: f64| {
+        for _ in 0..10 {
+            send(&mut ctl, &[("leg/p1", 0.5), ("leg/torque1", t)]);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        frames_to(&sim, 1)
+            .iter()
+            .rev()
+            .find_map(|f| match decode_command(f, &limits) {
+                Ok(MotorCommand::Control(c)) => Some(c.t),
+                _ => None,
+            })
+            .expect("a control command")
+    };
+    // 20 N·m: inside the AK70-10's ±25, beyond the AK80-9's ±18; it goes out as 20, so the
+    // stage quantises with the AK70-10's ranges.
+    let t = torque_sent(20.0);
+    assert!((t - 20.0).abs() < 0.02, "{t}");
+    assert!(20.0 > mit_limits("ak80-9").unwrap().t.max);
+    // 100 N·m: beyond the model's range, clamped to its +25 (all ones on the wire).
+    assert_eq!(torque_sent(100.0), limits.t.max);
+    assert_eq!(torque_sent(-100.0), limits.t.min);
+
+    let status = exec.stop();
+    assert!(status.success(), "{status}: {:#?}", exec.log());
+    assert!(
+        exec.log()
+            .iter()
+            .any(|l| l.contains("devices in their safe state (1 confirmed on the wire)")),
+        "{:#?}",
+        exec.log()
+    );
+    std::thread::sleep(Duration::from_millis(100));
+    assert!(!node(&sim, 0).enabled, "out of motor mode");
+    let to_it = frames_to(&sim, 1);
+    assert_eq!(
+        decode_command(to_it.last().expect("frames"), &limits),
+        Ok(MotorCommand::Special(SpecialCommand::Exit)),
+        "the last frame is the exit frame"
+    );
 }

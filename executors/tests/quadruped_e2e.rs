@@ -10,7 +10,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use conductor_bus::{Bus, Controller, Domain, StateSubscriber};
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim};
 use conductor_devices::sim::runner::{run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;

@@ -39,7 +39,7 @@
 //! * **Simulated** protocols (`sim`) have no wire; unknown kinds no model: no load.
 
 use conductor_devices::device::{Dxl1Model, DxlXConfig, Dynamixel1, DynamixelX, RegChannel};
-use conductor_devices::protocol;
+use conductor_devices::protocol_stage::{self, Dxl1ReadMode, Dxl2ReadMode};
 use conductor_devices::Device as _;
 
 use super::Subsystem;
@@ -188,7 +188,7 @@ fn dxl2_status(len: usize) -> usize {
 /// Dynamixel 2.0 FAST read reply: one packet, a slice (ERR, ID, data, CRC) per servo: what the
 /// protocol stage waits for; checked against the encoder by a test.
 fn dxl2_fast_reply(lens: &[usize]) -> usize {
-    protocol::fast_reply_len(lens.iter().copied())
+    protocol_stage::fast_reply_len(lens.iter().copied())
 }
 /// Dynamixel 1.0 SYNC WRITE: LEN = (L + 1)·N + 4, plus FF FF ID LEN.
 fn dxl1_sync_write(n: usize, len: usize) -> usize {
@@ -396,7 +396,7 @@ impl Bus<'_> {
                     Proto::Dxl2 { fast } => {
                         // As the stage does: a combined reply too long for one packet is
                         // read with SYNC / BULK READ instead.
-                        let fast = fast && protocol::fast_read_fits(lens.iter().copied());
+                        let fast = fast && protocol_stage::fast_read_fits(lens.iter().copied());
                         let (what, size) = match (uniform, fast) {
                             (true, false) => ("SYNC READ", dxl2_sync_read(n)),
                             (true, true) => ("FAST SYNC READ", dxl2_sync_read(n)),
@@ -445,11 +445,10 @@ impl Subsystem {
                 .filter(|v| *v > 0)
                 .unwrap_or(DEFAULT_SPEED)
         };
-        let read = p.params.str("read").unwrap_or("");
         let (proto, wire) = match p.kind.as_str() {
             "dynamixel2" => (
                 Proto::Dxl2 {
-                    fast: read == "fast_sync",
+                    fast: p.params.choice("read").ok() == Some(Dxl2ReadMode::Fast),
                 },
                 Wire::Uart {
                     baud: speed("baud"),
@@ -457,7 +456,7 @@ impl Subsystem {
             ),
             "dynamixel1" => (
                 Proto::Dxl1 {
-                    single: read == "single",
+                    single: p.params.choice("read").ok() == Some(Dxl1ReadMode::Single),
                 },
                 Wire::Uart {
                     baud: speed("baud"),

@@ -485,7 +485,7 @@ impl Manifest {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use conductor_devices::kinds::Stage;
+    use conductor_devices::kinds::Role;
 
     #[test]
     fn calibration_round_trips() {
@@ -505,10 +505,10 @@ mod tests {
     #[test]
     fn no_kind_parameter_shadows_a_stage_key() {
         for k in KINDS {
-            let reserved = match k.stage {
-                Stage::Hardware => HARDWARE_KEYS,
-                Stage::Protocol => PROTOCOL_KEYS,
-                Stage::Device => DEVICE_KEYS,
+            let reserved = match k.role() {
+                Role::Hardware => HARDWARE_KEYS,
+                Role::Protocol => PROTOCOL_KEYS,
+                Role::Device => DEVICE_KEYS,
             };
             for p in k.params {
                 assert!(

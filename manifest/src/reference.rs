@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use conductor_devices::kinds::{self, KindSpec, ParamDefault, ParamType, Params, Stage};
+use conductor_devices::kinds::{self, KindSpec, ParamDefault, ParamType, Params, Role};
 use conductor_devices::Credential;
 
 fn ty(t: ParamType) -> &'static str {
@@ -27,11 +27,11 @@ fn default_text(d: Option<ParamDefault>) -> String {
     }
 }
 
-fn stage_title(s: Stage) -> &'static str {
-    match s {
-        Stage::Hardware => "Hardware kinds (`[subsystems.<s>.hardware.<name>]`)",
-        Stage::Protocol => "Protocol kinds (`[subsystems.<s>.protocols.<name>]`)",
-        Stage::Device => "Device kinds (`[subsystems.<s>.devices.<name>]`)",
+fn role_title(r: Role) -> &'static str {
+    match r {
+        Role::Hardware => "Hardware kinds (`[subsystems.<s>.hardware.<name>]`)",
+        Role::Protocol => "Protocol kinds (`[subsystems.<s>.protocols.<name>]`)",
+        Role::Device => "Device kinds (`[subsystems.<s>.devices.<name>]`)",
     }
 }
 
@@ -40,25 +40,25 @@ fn stage_title(s: Stage) -> &'static str {
 /// of parameters (type, default, range or choices, meaning).
 pub fn kinds_markdown(kinds: &[KindSpec]) -> String {
     let mut out = String::new();
-    for stage in [Stage::Hardware, Stage::Protocol, Stage::Device] {
-        let _ = writeln!(out, "### {}\n", stage_title(stage));
-        for k in kinds.iter().filter(|k| k.stage == stage) {
+    for role in [Role::Hardware, Role::Protocol, Role::Device] {
+        let _ = writeln!(out, "### {}\n", role_title(role));
+        for k in kinds.iter().filter(|k| k.role() == role) {
             let _ = writeln!(out, "#### `{}`\n\n{}\n", k.kind, k.doc);
-            if let Some(m) = k.medium {
+            if let Some(m) = k.medium() {
                 let _ = writeln!(out, "- Carries: {}.", m.name());
             }
-            if let Some(r) = k.resource {
+            if let Some(r) = k.resource() {
                 let _ = writeln!(
                     out,
                     "- Exclusive resource: `{r}` (no two hardware components of a manifest may \
                      name the same one)."
                 );
             }
-            if !k.protocols.is_empty() {
-                let names: Vec<String> = k.protocols.iter().map(|p| format!("`{p}`")).collect();
+            if !k.protocols().is_empty() {
+                let names: Vec<String> = k.protocols().iter().map(|p| format!("`{p}`")).collect();
                 let _ = writeln!(out, "- Sits on protocols of kind: {}.", names.join(", "));
             }
-            if stage == Stage::Device && k.params.iter().all(|p| p.default.is_some()) {
+            if role == Role::Device && k.params.iter().all(|p| p.default.is_some()) {
                 let params = Params::new(k, BTreeMap::new());
                 if let Ok(dev) = kinds::build_device(k.kind, &params, Credential::id(0)) {
                     let chans: Vec<String> = dev

@@ -6,28 +6,31 @@
 
 use std::path::Path;
 
-use conductor_devices::kinds::{KindSpec, Medium, ParamSpec, ParamType, Stage, KINDS};
+use conductor_devices::kinds::{
+    Build, BuildError, Capacity, HardwareBuild, KindSpec, OpenedHardware, ParamSpec, Params, Role,
+    KINDS,
+};
 use conductor_manifest::{Manifest, ManifestError};
 
 /// A serial-like hardware whose `port` is an exclusive OS resource, so the corpus can show the
 /// "two subsystems on one serial device" error whatever real kinds this build has.
 const TEST_SERIAL: KindSpec = KindSpec {
-    stage: Stage::Hardware,
     kind: "test-serial",
-    medium: Some(Medium::Bytes),
-    resource: Some("port"),
-    protocols: &[],
-    safe_actions: &[],
-    params: &[ParamSpec {
-        name: "port",
-        ty: ParamType::Str,
-        default: None,
-        range: None,
-        choices: &[],
-        doc: "device path",
-    }],
+    params: &[ParamSpec::text("port", None, "device path")],
     doc: "test-only serial hardware",
+    build: Build::Hardware {
+        resource: Some("port"),
+        open: HardwareBuild::Bytes(never_opened),
+    },
 };
+
+/// The corpus is only validated: nothing opens [`TEST_SERIAL`].
+fn never_opened(_: &Params, _: Capacity) -> Result<OpenedHardware<u8>, BuildError> {
+    Err(BuildError::UnknownKind {
+        role: Role::Hardware,
+        kind: "test-serial".into(),
+    })
+}
 
 /// The built-in simulated kinds plus [`TEST_SERIAL`]: a fixed table, so that the snapshots (which
 /// list the known kinds in some messages) do not change when real kinds are added to the build.

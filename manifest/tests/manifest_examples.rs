@@ -190,3 +190,59 @@ fn shipped_manifests_have_no_warnings() {
         assert!(n > 0, "no manifests in {dir}");
     }
 }
+
+/// The `cubemars_ak` kind: its model is a choice (default AK80-9), its channels are the MIT
+/// motor's, and an unknown model is refused with the models it knows.
+#[test]
+fn a_cubemars_ak_manifest_validates() {
+    let text = |model: &str| {
+        format!(
+            r#"
+system = "bot"
+[subsystems.leg]
+rate_hz = 500
+[subsystems.leg.hardware.can0]
+kind = "slcan"
+port = "/dev/ttyACM0"
+[subsystems.leg.protocols.mit]
+kind = "can_motors"
+hardware = "can0"
+model = "ak70-10"
+[subsystems.leg.devices.knee]
+kind = "cubemars_ak"
+protocol = "mit"
+id = 1
+{model}
+kp = 20.0
+kd = 1.0
+[subsystems.leg.states.knee]
+device = "knee"
+channel = "position"
+writable = true
+[subsystems.leg.states.knee_torque]
+device = "knee"
+channel = "torque"
+writable = true
+"#
+        )
+    };
+    let m =
+        Manifest::parse(&text("model = \"ak70-10\""), "ak.toml").unwrap_or_else(|e| panic!("{e}"));
+    let knee = &m.subsystems[0].devices[0];
+    assert_eq!(knee.kind, "cubemars_ak");
+    assert_eq!(knee.params.str("model").unwrap(), "ak70-10");
+    let names: Vec<&str> = knee.channels.iter().map(|c| c.name).collect();
+    assert_eq!(&names[..3], ["position", "velocity", "torque"]);
+    let m = Manifest::parse(&text(""), "ak.toml").unwrap();
+    assert_eq!(
+        m.subsystems[0].devices[0].params.str("model").unwrap(),
+        "ak80-9"
+    );
+    let e = Manifest::parse(&text("model = \"ak80-64\""), "ak.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("subsystems.leg.devices.knee.model") && e.contains("ak60-6, ak70-10, ak80-9"),
+        "{e}"
+    );
+}

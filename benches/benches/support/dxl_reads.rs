@@ -17,7 +17,7 @@
 #![allow(dead_code)]
 
 use conductor_devices::device::{x_channel, x_table, DxlXConfig, DynamixelX, Layout};
-use conductor_devices::protocol::{Dxl2Protocol, Dxl2ReadMode, Timing};
+use conductor_devices::protocol_stage::{Dxl2Protocol, Dxl2ReadMode, Timing};
 use conductor_devices::sim::dxl::DxlSimConfig;
 use conductor_devices::sim::fault::FaultConfig;
 use conductor_devices::sim::hardware::DxlSimHardware;

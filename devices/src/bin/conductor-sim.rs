@@ -29,14 +29,14 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::hw::SlcanDialect;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
 use conductor_devices::sim::fault::FaultConfig;
 use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty, Running};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_devices::sim::socketcan_bus::SocketCanSim;
-use conductor_protocols::slcan::Dialect;
 
 #[derive(Parser)]
 #[command(
@@ -59,6 +59,51 @@ struct Where {
     /// Print the stats line every this many milliseconds (0: only on request).
     #[arg(long, default_value_t = 0)]
     stats_ms: u64,
+}
+
+/// The simulated CAN nodes of the `slcan` and `socketcan` simulators.
+#[derive(Args)]
+struct CanNodes {
+    /// MIT-mode motor IDs.
+    #[arg(long, value_delimiter = ',')]
+    mit: Vec<u8>,
+    /// ODrive node IDs.
+    #[arg(long, value_delimiter = ',')]
+    odrive: Vec<u8>,
+    /// MIT model (ranges): ak10-9, ak60-6, ak70-10, ak80-6, ak80-9, ak80-64, mini-cheetah.
+    #[arg(long, default_value = "ak80-9")]
+    model: String,
+    /// MIT motors send 8-byte replies (temperature, fault code).
+    #[arg(long)]
+    long_reply: bool,
+    /// ODrive heartbeat period (ms, 0 = off).
+    #[arg(long, default_value_t = 100)]
+    heartbeat_ms: u64,
+    /// ODrive encoder-estimate period (ms, 0 = off).
+    #[arg(long, default_value_t = 0)]
+    encoder_ms: u64,
+}
+
+impl CanNodes {
+    /// The nodes; exits with status 2 on an unknown MIT model.
+    fn build(&self) -> Vec<Box<dyn CanNode>> {
+        let Some(limits) = mit_limits(&self.model) else {
+            eprintln!("conductor-sim: unknown MIT model {:?}", self.model);
+            std::process::exit(2);
+        };
+        let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
+        for &id in &self.mit {
+            nodes.push(Box::new(MitMotorSim::new(id, limits, 0, self.long_reply)));
+        }
+        for &n in &self.odrive {
+            nodes.push(Box::new(OdriveAxisSim::new(
+                n,
+                self.heartbeat_ms,
+                self.encoder_ms,
+            )));
+        }
+        nodes
+    }
 }
 
 #[derive(Args)]
@@ -120,27 +165,11 @@ enum Cmd {
     Slcan {
         #[command(flatten)]
         at: Where,
-        /// MIT-mode motor IDs.
-        #[arg(long, value_delimiter = ',')]
-        mit: Vec<u8>,
-        /// ODrive node IDs.
-        #[arg(long, value_delimiter = ',')]
-        odrive: Vec<u8>,
-        /// MIT model (ranges): ak10-9, ak60-6, ak70-10, ak80-6, ak80-9, ak80-64, mini-cheetah.
-        #[arg(long, default_value = "ak80-9")]
-        model: String,
-        /// MIT motors send 8-byte replies (temperature, fault code).
-        #[arg(long)]
-        long_reply: bool,
+        #[command(flatten)]
+        nodes: CanNodes,
         /// SLCAN dialect: canable (CR acks, S7 = 750k) or lawicel (z acks, S7 = 800k).
         #[arg(long, default_value = "canable")]
-        dialect: String,
-        /// ODrive heartbeat period (ms, 0 = off).
-        #[arg(long, default_value_t = 100)]
-        heartbeat_ms: u64,
-        /// ODrive encoder-estimate period (ms, 0 = off).
-        #[arg(long, default_value_t = 0)]
-        encoder_ms: u64,
+        dialect: SlcanDialect,
     },
     /// MIT-mode motors and ODrive axes on a SocketCAN interface (e.g. a vcan: `ip link add
     /// vcan0 type vcan && ip link set vcan0 up`); they survive the interface going down or
@@ -149,24 +178,8 @@ enum Cmd {
         /// The interface (must exist and be up).
         #[arg(long)]
         interface: String,
-        /// MIT-mode motor IDs.
-        #[arg(long, value_delimiter = ',')]
-        mit: Vec<u8>,
-        /// ODrive node IDs.
-        #[arg(long, value_delimiter = ',')]
-        odrive: Vec<u8>,
-        /// MIT model (ranges).
-        #[arg(long, default_value = "ak80-9")]
-        model: String,
-        /// MIT motors send 8-byte replies (temperature, fault code).
-        #[arg(long)]
-        long_reply: bool,
-        /// ODrive heartbeat period (ms, 0 = off).
-        #[arg(long, default_value_t = 100)]
-        heartbeat_ms: u64,
-        /// ODrive encoder-estimate period (ms, 0 = off).
-        #[arg(long, default_value_t = 0)]
-        encoder_ms: u64,
+        #[command(flatten)]
+        nodes: CanNodes,
     },
 }
 
@@ -296,19 +309,7 @@ fn dxl_stats(sim: &DxlBusSim) -> String {
 
 fn slcan_stats(a: &SlcanAdapterSim) -> String {
     let s = a.stats();
-    let nodes = a
-        .nodes()
-        .iter()
-        .map(|n| {
-            let s = n.snapshot();
-            format!(
-                "{{\"id\": {}, \"position\": {}, \"enabled\": {}, \"frames_in\": {}, \
-                 \"fault\": {}, \"ignored\": {}}}",
-                s.id, s.position, s.enabled, s.frames_in, s.fault, s.ignored
-            )
-        })
-        .collect::<Vec<_>>()
-        .join(", ");
+    let nodes = node_stats(a.nodes());
     format!(
         "{{\"bytes_in\": {}, \"commands\": {}, \"frames_from_host\": {}, \"frames_to_host\": {}, \
          \"nacks\": {}, \"bytes_out\": {}, \"open\": {}, \"nodes\": [{}]}}",
@@ -514,63 +515,17 @@ fn main() {
             let _ = std::io::stdout().flush();
             serve(running, at.stats_ms, dxl_stats, dxl_control);
         }),
-        Cmd::Slcan {
-            at,
-            mit,
-            odrive,
-            model,
-            long_reply,
-            dialect,
-            heartbeat_ms,
-            encoder_ms,
-        } => {
-            let Some(limits) = mit_limits(&model) else {
-                eprintln!("conductor-sim: unknown MIT model {model:?}");
-                std::process::exit(2);
-            };
-            let dialect = match dialect.as_str() {
-                "canable" => Dialect::CANABLE,
-                "lawicel" => Dialect::LAWICEL,
-                other => {
-                    eprintln!("conductor-sim: unknown SLCAN dialect {other:?} (canable, lawicel)");
-                    std::process::exit(2);
-                }
-            };
+        Cmd::Slcan { at, nodes, dialect } => {
+            let nodes = nodes.build();
             endpoint(&at).map(|(ep, desc)| {
-                let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
-                for id in mit {
-                    nodes.push(Box::new(MitMotorSim::new(id, limits, 0, long_reply)));
-                }
-                for n in odrive {
-                    nodes.push(Box::new(OdriveAxisSim::new(n, heartbeat_ms, encoder_ms)));
-                }
-                let running = run_slcan(ep, SlcanAdapterSim::new(dialect, nodes));
+                let running = run_slcan(ep, SlcanAdapterSim::new(dialect.dialect(), nodes));
                 println!("ready {desc}");
                 let _ = std::io::stdout().flush();
                 serve(running, at.stats_ms, slcan_stats, slcan_control);
             })
         }
-        Cmd::Socketcan {
-            interface,
-            mit,
-            odrive,
-            model,
-            long_reply,
-            heartbeat_ms,
-            encoder_ms,
-        } => {
-            let Some(limits) = mit_limits(&model) else {
-                eprintln!("conductor-sim: unknown MIT model {model:?}");
-                std::process::exit(2);
-            };
-            let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
-            for id in mit {
-                nodes.push(Box::new(MitMotorSim::new(id, limits, 0, long_reply)));
-            }
-            for n in odrive {
-                nodes.push(Box::new(OdriveAxisSim::new(n, heartbeat_ms, encoder_ms)));
-            }
-            SocketCanSim::start(&interface, nodes).map(|sim| {
+        Cmd::Socketcan { interface, nodes } => {
+            SocketCanSim::start(&interface, nodes.build()).map(|sim| {
                 say(&format!("ready socketcan {interface}"));
                 serve_socketcan(sim);
             })

@@ -3,10 +3,10 @@
 
 use std::f64::consts::PI;
 
+use super::control_table::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};
 use super::reg_device::RegDevice;
-use super::register::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};
+use crate::component::SafeAction;
 use crate::message::Credential;
-use crate::stage::SafeAction;
 
 /// X-series control table addresses (XM430, protocols.md §1.9).
 pub mod x_table {
@@ -462,3 +462,138 @@ impl RegDevice<Dxl1Series> {
         )
     }
 }
+
+use crate::kinds::{Build, BuildError, Invalid, KindSpec, ParamSpec, Params, REGISTER_SAFE};
+
+crate::choices!(Dxl1Model { Ax = "ax", Mx = "mx" });
+
+/// The model names a `dynamixel_x` may be told to expect: those of [`X_MODELS`], and "any".
+pub const X_MODEL_NAMES: &[&str] = &[
+    "xm430-w350",
+    "xm430-w210",
+    "xh430-w350",
+    "xh430-w210",
+    "xh430-v350",
+    "xh430-v210",
+    "xm540-w270",
+    "xm540-w150",
+    "xh540-w270",
+    "xh540-w150",
+    "xh540-v270",
+    "xh540-v150",
+    "any",
+];
+
+/// The `dynamixel_x` device kind.
+pub const DYNAMIXEL_X: KindSpec = KindSpec {
+    kind: "dynamixel_x",
+    params: &[
+        ParamSpec::int("zero", Some(2048), -1_048_575.0, 1_048_575.0, "raw position meaning 0 rad"),
+        ParamSpec::int("operating_mode", Some(3), 0.0, 16.0, "the servo's Operating Mode (3 position: goals 0..4095; 4/5 extended: ±256 rev)"),
+        ParamSpec::float("current_unit_ma", 2.69, Some((0.01, 100.0)), "Present/Goal Current unit (mA)"),
+        ParamSpec::int("max_current_raw", Some(2047), 1.0, 32767.0, "largest |Present Current| accepted (raw); larger values are treated as damaged"),
+        ParamSpec::float("max_position_rev", 256.0, Some((1.0, 524_288.0)), "largest |Present Position| accepted (revolutions)"),
+        ParamSpec::names("model", Some("xm430-w350"), X_MODEL_NAMES, "the model the servo must report at bring-up (its model number); \"any\": no check"),
+        ParamSpec::unset_int("return_delay_us", 0.0, 508.0, "Return Delay Time written at bring-up (µs, even; EEPROM: written with torque off); match the protocol's return_delay_us"),
+        ParamSpec::unset_int("status_return_level", 1.0, 2.0, "Status Return Level written at bring-up (1: reads answered, 2: every instruction)"),
+        ParamSpec::unset_int("min_position_limit", 0.0, 4095.0, "Min Position Limit written at bring-up (raw pulses, EEPROM)"),
+        ParamSpec::unset_int("max_position_limit", 0.0, 4095.0, "Max Position Limit written at bring-up (raw pulses, EEPROM)"),
+        ParamSpec::unset_int("velocity_limit", 0.0, 1023.0, "Velocity Limit written at bring-up (raw, 0.229 rpm, EEPROM)"),
+        ParamSpec::unset_int("current_limit", 0.0, 2047.0, "Current Limit written at bring-up (raw, ≈2.69 mA, EEPROM)"),
+        ParamSpec::unset_int("profile_velocity", 0.0, 32767.0, "Profile Velocity written at bring-up (raw, 0.229 rpm; 0 = unlimited)"),
+        ParamSpec::unset_int("profile_acceleration", 0.0, 32767.0, "Profile Acceleration written at bring-up (raw, 214.577 rev/min²; 0 = unlimited)"),
+        ParamSpec::bool("reboot_on_fault", false, "after a hardware error (the servo cut its torque), reboot it (back-off 1 s doubling to 30 s), bring it up again and re-enable it where it is"),
+    ],
+    doc: "A Dynamixel X-series servo (XM430/XM540/XH430/XH540 control table). Channels: position \
+          (rad; reads Present Position, writes Goal Position), velocity (rad/s), current (A), \
+          goal_position (rad), torque_enable, operating_mode, temperature (°C), voltage (V), \
+          hardware_error (Hardware Error Status bits), enable. Brought up by PING (model number \
+          checked), its configuration read and written (EEPROM with torque off) and read back, \
+          Goal Position set to Present Position, then Torque Enable. Safe action: hold.",
+    build: Build::Device {
+        protocols: &["dynamixel2"],
+        safe_actions: REGISTER_SAFE,
+        build: |p, cred| Ok(Box::new(dynamixel_x(p, cred)?)),
+    },
+};
+
+fn dynamixel_x(p: &Params, cred: Credential) -> Result<DynamixelX, BuildError> {
+    let opt = |k: &str| p.opt_int(k);
+    let model = p.str("model")?;
+    let models = x_models(model).ok_or_else(|| {
+        BuildError::invalid(
+            "model",
+            Invalid::Name {
+                value: model.into(),
+                names: X_MODEL_NAMES,
+            },
+        )
+    })?;
+    let setup = DxlXSetup {
+        return_delay_us: opt("return_delay_us").and_then(|v| u32::try_from(v).ok()),
+        status_return_level: opt("status_return_level").and_then(|v| u8::try_from(v).ok()),
+        position_limits: (opt("min_position_limit"), opt("max_position_limit")),
+        velocity_limit: opt("velocity_limit"),
+        current_limit: opt("current_limit"),
+        profile: (opt("profile_acceleration"), opt("profile_velocity")),
+    };
+    let cfg = DxlXConfig {
+        zero: p.int("zero")?,
+        operating_mode: p.int_as("operating_mode")?,
+        current_unit_ma: p.float("current_unit_ma")?,
+        max_current_raw: p.int("max_current_raw")?,
+        max_position_rev: p.float("max_position_rev")?,
+        models,
+        setup,
+    };
+    Ok(DynamixelX::new(cred, cfg).reboot_on_fault(p.bool("reboot_on_fault")?))
+}
+
+/// The `dynamixel1` device kind.
+pub const DYNAMIXEL1: KindSpec = KindSpec {
+    kind: "dynamixel1",
+    params: &[
+        ParamSpec::choice::<Dxl1Model>(
+            "model",
+            "ax",
+            "ax: 1024 steps over 300°; mx: 4096 over 360°",
+        ),
+        ParamSpec::int(
+            "zero",
+            Some(-1),
+            -1.0,
+            4095.0,
+            "raw position meaning 0 rad (-1: the middle, 512 or 2048)",
+        ),
+        ParamSpec::unset_int(
+            "return_delay_us",
+            0.0,
+            508.0,
+            "Return Delay Time written at bring-up (µs, even)",
+        ),
+    ],
+    doc:
+        "A Dynamixel AX/MX servo on Protocol 1.0. Channels: position (rad), velocity (rad/s), load \
+          (fraction), torque_enable, temperature (°C), voltage (V), enable. Brought up by PING, \
+          its model number read (AX-12A/AX-18A/AX-12W or MX-28/64/106), then Goal Position set to \
+          the present one and Torque Enable. Overload, overheating and input voltage errors are \
+          faults. Safe action: hold.",
+    build: Build::Device {
+        protocols: &["dynamixel1"],
+        safe_actions: REGISTER_SAFE,
+        build: |p, cred| {
+            let model: Dxl1Model = p.choice("model")?;
+            let zero = match (p.int("zero")?, model) {
+                (z, _) if z >= 0 => z,
+                (_, Dxl1Model::Ax) => 512,
+                (_, Dxl1Model::Mx) => 2048,
+            };
+            let delay = p
+                .opt_int("return_delay_us")
+                .and_then(|v| u32::try_from(v).ok());
+            Ok(Box::new(Dynamixel1::with_return_delay(
+                cred, model, zero, delay,
+            )))
+        },
+    },
+};

@@ -19,12 +19,12 @@
 //! ranges are set in the motor's own menu): bring-up checks that the motor answers. A fault code
 //! (8-byte replies of newer firmware) trips it.
 
+use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
     DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, ROUND_TIMEOUT_NS,
 };
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
-use crate::stage::{Channel, Device, SafeAction, TickCtx};
 
 /// Channel indices of [`MitMotor`].
 pub mod mit_channel {
@@ -598,3 +598,30 @@ impl Device for MitMotor {
         )
     }
 }
+
+/// The `mit_motor` device kind.
+pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
+    kind: "mit_motor",
+    params: &[
+        crate::kinds::ParamSpec::float("kp", 0.0, Some((0.0, 500.0)), "position gain until the kp channel is written"),
+        crate::kinds::ParamSpec::float("kd", 0.0, Some((0.0, 5.0)), "velocity gain until the kd channel is written"),
+    ],
+    doc: "An MIT-mode motor (Katz firmware, CubeMars AK). Channels: position (rad), velocity (rad/s), \
+          torque (N·m), kp, kd (the gains in use), enable, temperature (°C) and fault (code), the \
+          last two from 8-byte replies. A tick's writes form one command; the motor only answers \
+          frames, so a sample re-sends the last command. Brought up by an exit-motor-mode frame \
+          (it must answer), then enter motor mode and a command holding the present position. \
+          Safe action: torque off (exit motor mode); `damp` commands kp = 0 and kd = `safe_value` \
+          (default: the kd parameter).",
+    build: crate::kinds::Build::Device {
+        protocols: &["can_motors"],
+        safe_actions: &["torque_off", "damp", "hold", "setpoint"],
+        build: |p, cred| {
+            Ok(Box::new(MitMotor::new(
+                cred,
+                p.float("kp")? as f32,
+                p.float("kd")? as f32,
+            )))
+        },
+    },
+};

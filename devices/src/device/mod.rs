@@ -14,17 +14,18 @@
 //! the executor (probe, model check, configuration, enable from the present position), tripped
 //! by the watchdog or a fault, re-enabled through `enable`.
 
-mod dynamixel;
-mod mit;
-mod odrive;
+mod control_table;
+pub mod cubemars_ak;
+pub(crate) mod dynamixel;
+pub(crate) mod mit;
+pub(crate) mod odrive;
 mod reg_device;
-mod register;
 
+pub use control_table::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};
 pub use dynamixel::{
     dxl1_channel, x_channel, x_models, x_table, Dxl1Model, Dxl1Series, DxlXConfig, DxlXSetup,
-    Dynamixel1, DynamixelX, XSeries, AX_MODELS, MX_MODELS, X_MODELS,
+    Dynamixel1, DynamixelX, XSeries, AX_MODELS, MX_MODELS, X_MODELS, X_MODEL_NAMES,
 };
 pub use mit::{mit_channel, MitMotor};
 pub use odrive::{odrive_channel, OdriveAxis, OdriveMode};
 pub use reg_device::{Layout, RegDevice};
-pub use register::{ConfigItem, ControlTable, Encoding, Indirect, RegChannel};

@@ -23,13 +23,13 @@ use std::f64::consts::TAU;
 
 use conductor_protocols::odrive_can::{axis_state, control_mode, input_mode, CmdId, Message};
 
+use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
     DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, PROBE_TRIES,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
-use crate::protocol::odrive_get;
+use crate::protocol_stage::odrive_get;
 use crate::queue::Bounded;
-use crate::stage::{Channel, Device, SafeAction, TickCtx};
 
 /// Channel indices of [`OdriveAxis`].
 pub mod odrive_channel {
@@ -627,3 +627,38 @@ impl Device for OdriveAxis {
         )
     }
 }
+
+crate::choices!(OdriveMode { Position = "position", Velocity = "velocity", Torque = "torque" });
+
+/// The `odrive_axis` device kind.
+pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
+    kind: "odrive_axis",
+    params: &[
+        crate::kinds::ParamSpec::choice::<OdriveMode>(
+            "control_mode",
+            "position",
+            "which input the setpoints drive",
+        ),
+        crate::kinds::ParamSpec::bool(
+            "poll",
+            true,
+            "request values with remote frames (false: use the axis's cyclic messages)",
+        ),
+    ],
+    doc: "An ODrive axis (CAN Simple, firmware 0.6). Channels: position (rad), velocity (rad/s), \
+          torque (N·m), current (A), state, error, bus_voltage (V), temperature (°C), enable. \
+          Brought up by a heartbeat request, the controller mode written, the input set to the \
+          present position, then closed-loop control, confirmed by its heartbeat. Safe action: \
+          torque off (idle).",
+    build: crate::kinds::Build::Device {
+        protocols: &["can_motors"],
+        safe_actions: &["torque_off", "hold", "setpoint"],
+        build: |p, cred| {
+            Ok(Box::new(OdriveAxis::new(
+                cred,
+                p.choice("control_mode")?,
+                p.bool("poll")?,
+            )))
+        },
+    },
+};

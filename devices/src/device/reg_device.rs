@@ -20,13 +20,13 @@
 //! checksum one in 256. A value outside its register's physical range is therefore treated as
 //! damaged: the channel goes stale and the rejection is counted, never delivered.
 
-use super::register::{ConfigItem, ControlTable, RegChannel};
+use super::control_table::{ConfigItem, ControlTable, RegChannel};
+use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
     Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, REG_ROUND_TIMEOUT_NS,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
-use crate::stage::{Channel, Device, SafeAction, TickCtx};
 
 /// Most registers one lifecycle step reads back.
 const EXPECT: usize = 48;

@@ -9,7 +9,7 @@ use std::os::unix::io::RawFd;
 
 use nix::errno::Errno;
 
-use crate::stage::HwError;
+use crate::component::HwError;
 
 /// Sets `O_NONBLOCK` on `fd`.
 pub(crate) fn set_nonblocking(fd: RawFd) -> io::Result<()> {

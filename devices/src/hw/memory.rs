@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use conductor_protocols::can::CanFrame;
 
-use crate::stage::{Hardware, HwError, TickCtx};
+use crate::component::{Hardware, HwError, TickCtx};
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     // A panicking test thread must not cascade into every other user of the bus.

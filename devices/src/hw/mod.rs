@@ -17,14 +17,14 @@
 
 pub(crate) mod fd;
 mod memory;
-mod serial;
-mod slcan;
-mod socketcan;
-mod udp;
+pub(crate) mod serial;
+pub(crate) mod slcan;
+pub(crate) mod socketcan;
+pub(crate) mod udp;
 
 pub use memory::{mem_pipe, MemCanBus, MemCanPort, MemPort};
 pub use serial::{SerialHardware, SerialOptions};
-pub use slcan::{SlcanHardware, SlcanOptions, SlcanStats};
+pub use slcan::{SlcanDialect, SlcanHardware, SlcanOpenError, SlcanOptions, SlcanStats};
 pub use socketcan::{
     controller_state, from_socketcan, interface_up, realtime_offset_ns, to_socketcan,
     SocketCanHardware,

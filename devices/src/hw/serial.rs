@@ -6,7 +6,7 @@ use std::time::Duration;
 use serialport::{DataBits, FlowControl, Parity, SerialPort, StopBits, TTYPort};
 
 use super::fd;
-use crate::stage::{Hardware, HwError, TickCtx};
+use crate::component::{Hardware, HwError, TickCtx};
 
 /// How to open a serial port.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -136,6 +136,40 @@ impl Hardware for SerialHardware {
         // Bounded wait for the last bytes (the safe-action packets) to leave the UART.
         let _ = std::io::Write::flush(&mut self.port);
     }
+}
+
+use crate::kinds::{
+    Build, BuildError, Capacity, HardwareBuild, KindSpec, OpenedHardware, ParamSpec, Params,
+};
+
+/// The `serial` hardware kind.
+pub const KIND: KindSpec = KindSpec {
+    kind: "serial",
+    params: &[
+        ParamSpec::text("port", None, "serial device, e.g. /dev/ttyUSB0 or /dev/serial/by-id/usb-FTDI_..."),
+        ParamSpec::int("baud", Some(1_000_000), 1200.0, 12_000_000.0, crate::kinds::BAUD_DOC),
+        ParamSpec::bool("low_latency", true, "ask the driver for ASYNC_LOW_LATENCY (FTDI: 1 ms latency timer); ignored where unsupported"),
+    ],
+    doc: "A serial port (USB adapter such as the ROBOTIS U2D2, RS-485 adapter, or a pty), raw 8N1, \
+          read and written without blocking.",
+    build: Build::Hardware {
+        resource: Some("port"),
+        open: HardwareBuild::Bytes(open_kind),
+    },
+};
+
+fn open_kind(p: &Params, _: Capacity) -> Result<OpenedHardware<u8>, BuildError> {
+    let port = p.str("port")?;
+    let opts = SerialOptions {
+        baud: crate::kinds::baud(p)?,
+        low_latency: p.bool("low_latency")?,
+        exclusive: true,
+    };
+    let hw = SerialHardware::open(port, &opts).map_err(|e| BuildError::open(port, e))?;
+    let baud = opts.baud;
+    Ok(OpenedHardware::new(hw)
+        .at_baud(baud)
+        .reopening_node(port, move |path| SerialHardware::open(path, &opts)))
 }
 
 #[cfg(test)]

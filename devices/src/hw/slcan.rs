@@ -26,8 +26,8 @@ use conductor_protocols::slcan::{
     MAX_FRAME_LINE,
 };
 
+use crate::component::{Hardware, HwCounters, HwError, TickCtx};
 use crate::queue::Bounded;
-use crate::stage::{Hardware, HwCounters, HwError, TickCtx};
 
 /// How to talk to the adapter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -393,4 +393,98 @@ impl<B: Hardware<Word = u8>> Hardware for SlcanHardware<B> {
         }
         self.port.shutdown();
     }
+}
+
+use crate::hw::{SerialHardware, SerialOptions};
+use crate::kinds::{
+    Build, BuildError, Capacity, HardwareBuild, Invalid, KindSpec, OpenError, OpenedHardware,
+    ParamSpec, Params,
+};
+
+/// The SLCAN variant an adapter speaks, as the manifest names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SlcanDialect {
+    /// CANable firmware: CR acknowledges a frame, `S7` is 750 kbit/s.
+    Canable,
+    /// LAWICEL CANUSB: `z` acknowledges a frame, `S7` is 800 kbit/s.
+    Lawicel,
+}
+
+crate::choices!(SlcanDialect { Canable = "canable", Lawicel = "lawicel" });
+
+impl SlcanDialect {
+    /// The codec's description of this variant.
+    pub fn dialect(self) -> Dialect {
+        match self {
+            SlcanDialect::Canable => Dialect::CANABLE,
+            SlcanDialect::Lawicel => Dialect::LAWICEL,
+        }
+    }
+}
+
+/// The `slcan` hardware kind.
+pub const KIND: KindSpec = KindSpec {
+    kind: "slcan",
+    params: &[
+        ParamSpec::text(
+            "port",
+            None,
+            "serial device of the USB-CAN adapter, e.g. /dev/ttyACM0",
+        ),
+        ParamSpec::int(
+            "baud",
+            Some(115_200),
+            1200.0,
+            12_000_000.0,
+            "serial line speed (ignored by USB CDC adapters)",
+        ),
+        ParamSpec::int(
+            "bitrate",
+            Some(1_000_000),
+            10_000.0,
+            1_000_000.0,
+            "CAN bitrate (a standard Sn rate)",
+        ),
+        ParamSpec::choice::<SlcanDialect>(
+            "dialect",
+            "canable",
+            "SLCAN variant: canable (CR acks, S7 = 750k) or lawicel (z acks, S7 = 800k)",
+        ),
+    ],
+    doc: "An SLCAN (LAWICEL) USB-CAN adapter (CANable, CANUSB, ...) spoken in user space over \
+          its serial port: no kernel CAN support needed.",
+    build: Build::Hardware {
+        resource: Some("port"),
+        open: HardwareBuild::Can(open_kind),
+    },
+};
+
+fn open_kind(p: &Params, _: Capacity) -> Result<OpenedHardware<CanFrame>, BuildError> {
+    let port = p.str("port")?;
+    let bps = p.int("bitrate")?;
+    let bitrate = u32::try_from(bps)
+        .ok()
+        .and_then(Bitrate::from_bps)
+        .ok_or(BuildError::invalid("bitrate", Invalid::Bitrate(bps)))?;
+    let opts = SlcanOptions {
+        bitrate,
+        dialect: p.choice::<SlcanDialect>("dialect")?.dialect(),
+        ..SlcanOptions::default()
+    };
+    let serial = SerialOptions {
+        baud: crate::kinds::baud(p)?,
+        low_latency: true,
+        exclusive: true,
+    };
+    let baud = serial.baud;
+    let open = move |port: &str| -> Result<SlcanHardware<SerialHardware>, OpenError> {
+        Ok(SlcanHardware::open(
+            SerialHardware::open(port, &serial)?,
+            opts,
+        )?)
+    };
+    let hw = open(port).map_err(|e| BuildError::open(port, e))?;
+    Ok(OpenedHardware::new(hw)
+        .at_baud(baud)
+        .reopening_node(port, open))
 }

@@ -18,7 +18,7 @@ use socketcan::{CanSocket, EmbeddedFrame, Socket, SocketOptions};
 use nix::errno::Errno;
 use nix::time::{clock_gettime, ClockId};
 
-use crate::stage::{BusCondition, ControllerState, Hardware, HwCounters, HwError, TickCtx};
+use crate::component::{BusCondition, ControllerState, Hardware, HwCounters, HwError, TickCtx};
 
 /// Converts to socketcan's frame type (for transmission).
 pub fn to_socketcan(f: &CanFrame) -> socketcan::CanFrame {
@@ -294,6 +294,41 @@ impl Hardware for SocketCanHardware {
             ..HwCounters::default()
         }
     }
+}
+
+use crate::kinds::{
+    Build, BuildError, Capacity, HardwareBuild, KindSpec, OpenedHardware, ParamSpec, Params,
+};
+
+/// The `socketcan` hardware kind.
+pub const KIND: KindSpec = KindSpec {
+    kind: "socketcan",
+    params: &[
+        ParamSpec::text("interface", None, "CAN interface, e.g. can0 (bring it up first: ip link set can0 up type can bitrate 1000000)"),
+        ParamSpec::int("bitrate", Some(1_000_000), 10_000.0, 1_000_000.0, "the bitrate the interface was brought up with (bit/s), for the bus-load check"),
+    ],
+    doc: "A Linux SocketCAN interface, raw socket, non-blocking.",
+    build: Build::Hardware {
+        resource: Some("interface"),
+        open: HardwareBuild::Can(open_kind),
+    },
+};
+
+fn open_kind(p: &Params, _: Capacity) -> Result<OpenedHardware<CanFrame>, BuildError> {
+    let iface = p.str("interface")?;
+    let hw = SocketCanHardware::open(iface).map_err(|e| BuildError::open(iface, e))?;
+    let (again, name) = (iface.to_string(), iface.to_string());
+    Ok(OpenedHardware::new(hw).reopening(
+        iface,
+        // A down interface opens but cannot send: wait until it is up.
+        move || {
+            if !interface_up(&again) {
+                return Err(format!("{again} is not up"));
+            }
+            SocketCanHardware::open(&again).map_err(|e| e.to_string())
+        },
+        move || interface_up(&name),
+    ))
 }
 
 #[cfg(test)]

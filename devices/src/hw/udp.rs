@@ -4,7 +4,7 @@
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
 
-use crate::stage::{Hardware, HwError, TickCtx};
+use crate::component::{Hardware, HwError, TickCtx};
 
 /// Largest datagram accepted.
 const MAX_DATAGRAM: usize = 2048;
@@ -100,6 +100,42 @@ impl Hardware for UdpHardware {
             }
         }
     }
+}
+
+use crate::kinds::{
+    Build, BuildError, Capacity, HardwareBuild, KindSpec, OpenedHardware, ParamSpec, Params,
+};
+
+/// The `udp` hardware kind.
+pub const KIND: KindSpec = KindSpec {
+    kind: "udp",
+    params: &[
+        ParamSpec::text(
+            "remote",
+            None,
+            "peer address host:port (a serial-over-UDP bridge, conductor-sim --udp)",
+        ),
+        ParamSpec::text("local", Some("0.0.0.0:0"), "local address to bind"),
+        ParamSpec::int(
+            "baud",
+            Some(1_000_000),
+            1200.0,
+            12_000_000.0,
+            "speed of the serial bus behind the bridge (bit/s), for the protocol's timing",
+        ),
+    ],
+    doc: "A byte stream over UDP datagrams (non-blocking, connected to one peer).",
+    build: Build::Hardware {
+        resource: None,
+        open: HardwareBuild::Bytes(open_kind),
+    },
+};
+
+fn open_kind(p: &Params, _: Capacity) -> Result<OpenedHardware<u8>, BuildError> {
+    let local = crate::kinds::socket_addr(p, "local")?;
+    let remote = crate::kinds::socket_addr(p, "remote")?;
+    let hw = UdpHardware::open(local, remote).map_err(|e| BuildError::open("udp", e))?;
+    Ok(OpenedHardware::new(hw).at_baud(crate::kinds::baud(p)?))
 }
 
 #[cfg(test)]

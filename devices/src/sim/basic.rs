@@ -4,12 +4,12 @@
 //! They speak [`SimWord`]s through the [`SimProtocol`], so the executor runs every stage (device
 //! tagging, protocol bundling and reply matching, hardware queues) exactly as for a real bus.
 
+use crate::component::{
+    Channel, Device, Hardware, HwError, Protocol, ProtocolCounters, SafeAction, TickCtx,
+};
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::outstanding::{Outstanding, Pending};
 use crate::queue::Bounded;
-use crate::stage::{
-    Channel, Device, Hardware, HwError, Protocol, ProtocolCounters, SafeAction, TickCtx,
-};
 
 /// The unit the simulated bus carries.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -386,6 +386,106 @@ impl Device for SimDevice {
         self.flush(ctx, out);
     }
 }
+
+use crate::kinds::{
+    Build, BuildError, Capacity, HardwareBuild, KindSpec, OpenedHardware, ParamSpec, Params,
+    ProtocolBuild,
+};
+use crate::link::Link;
+
+/// The `sine` hardware kind.
+pub const SINE: KindSpec = KindSpec {
+    kind: "sine",
+    params: &[
+        ParamSpec::float("amplitude", 1.0, None, "amplitude of the answered sine"),
+        ParamSpec::float(
+            "frequency_hz",
+            1.0 / (2.0 * core::f64::consts::PI),
+            Some((0.0, 1e6)),
+            "frequency (default 1/2π Hz, i.e. sin(t) as in the thesis)",
+        ),
+        ParamSpec::float(
+            "phase_per_id",
+            0.0,
+            None,
+            "phase offset added per device id (rad)",
+        ),
+    ],
+    doc: "Simulated hardware of the thesis' stress test: answers every sample request at time t \
+          with amplitude·sin(2π·frequency·t + phase·id), t in seconds of CLOCK_MONOTONIC.",
+    build: Build::Hardware {
+        resource: None,
+        open: HardwareBuild::Sim(|p, cap| {
+            Ok(OpenedHardware::new(SineHardware::new(
+                p.float("amplitude")?,
+                p.float("frequency_hz")?,
+                p.float("phase_per_id")?,
+                cap.words,
+            )))
+        }),
+    },
+};
+
+/// The `loopback` hardware kind.
+pub const LOOPBACK: KindSpec = KindSpec {
+    kind: "loopback",
+    params: &[ParamSpec::float(
+        "tau_s",
+        0.0,
+        Some((0.0, 1e3)),
+        "first-order lag between setpoint and sampled value (s); 0 = immediate",
+    )],
+    doc: "Simulated hardware that answers a sample request with the last setpoint written to \
+          the same device, optionally through a first-order lag (a stand-in for a servo). \
+          Each device starts where its state reads a value inside the state's limits (0 when \
+          the limits allow it, else their middle or the one finite limit), not at 0 in device \
+          units.",
+    build: Build::Hardware {
+        resource: None,
+        open: HardwareBuild::Sim(|p, cap| {
+            Ok(OpenedHardware::new(LoopbackHardware::new(
+                p.float("tau_s")?,
+                cap.devices,
+                cap.words,
+            )))
+        }),
+    },
+};
+
+/// The `sim` protocol kind.
+pub const SIM_PROTOCOL: KindSpec = KindSpec {
+    kind: "sim",
+    params: &[ParamSpec::int(
+        "timeout_us",
+        Some(10_000),
+        1.0,
+        10_000_000.0,
+        "a sample request unanswered after this long is reported missing (µs)",
+    )],
+    doc: "Protocol of the simulated hardware: one word per request, replies matched by device id.",
+    build: Build::Protocol(ProtocolBuild::Sim(link_sim)),
+};
+
+fn link_sim(
+    p: &Params,
+    hw: OpenedHardware<SimWord>,
+    cap: Capacity,
+) -> Result<Box<dyn Link>, BuildError> {
+    let timeout_us: u64 = p.int_as("timeout_us")?;
+    hw.link(SimProtocol::new(cap.in_flight, timeout_us * 1000), cap)
+}
+
+/// The `sim` device kind.
+pub const SIM_DEVICE: KindSpec = KindSpec {
+    kind: "sim",
+    params: &[],
+    doc: "A device on the simulated bus with one read/write channel, `value`.",
+    build: Build::Device {
+        protocols: &["sim"],
+        safe_actions: &["hold", "torque_off", "setpoint"],
+        build: |_, cred| Ok(Box::new(SimDevice::new(cred))),
+    },
+};
 
 #[cfg(test)]
 mod tests {

@@ -11,7 +11,7 @@ use super::can_motors::{CanNode, NodeSnapshot};
 use super::dxl::{DxlBusSim, DxlSimConfig, DxlSimStats};
 use super::fault::{FaultConfig, FaultInjector, FaultRecord};
 use super::slcan_adapter::{SlcanAdapterSim, SlcanSimStats};
-use crate::stage::{Hardware, HwError, TickCtx};
+use crate::component::{Hardware, HwError, TickCtx};
 
 /// What the host sent in one `transmit`, as the simulator saw it.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -320,4 +320,139 @@ impl Hardware for SlcanSimPort {
         }
         Ok(n)
     }
+}
+
+use crate::kinds::{
+    id_list, Build, BuildError, Capacity, HardwareBuild, KindSpec, OpenedHardware, ParamSpec,
+    Params,
+};
+
+/// The `dynamixel_sim` hardware kind.
+pub const DYNAMIXEL_SIM: KindSpec = KindSpec {
+    kind: "dynamixel_sim",
+    params: &[
+        ParamSpec::text(
+            "ids",
+            Some("1,2,3,4,5,6"),
+            "servo IDs on the simulated bus, comma-separated",
+        ),
+        ParamSpec::int(
+            "baud",
+            Some(1_000_000),
+            1200.0,
+            12_000_000.0,
+            crate::kinds::BAUD_DOC,
+        ),
+        crate::kinds::RETURN_DELAY_US,
+        ParamSpec::bool(
+            "baud_timing",
+            true,
+            "replies take their wire time at `baud`",
+        ),
+        ParamSpec::float(
+            "tau_s",
+            0.05,
+            Some((0.0, 100.0)),
+            "time constant of the servos' position response (s)",
+        ),
+        ParamSpec::float(
+            "corrupt",
+            0.0,
+            Some((0.0, 1.0)),
+            "probability that a byte is corrupted (both directions)",
+        ),
+        ParamSpec::float(
+            "drop",
+            0.0,
+            Some((0.0, 1.0)),
+            "probability that a byte is lost (both directions)",
+        ),
+        ParamSpec::int("seed", Some(1), 0.0, 9.0e15, "seed of the fault generator"),
+    ],
+    doc: "An in-process Dynamixel Protocol 2.0 bus of XM430 servos (the simulator of \
+          `conductor-sim dxl`, without the pty), with optional fault injection.",
+    build: Build::Hardware {
+        resource: None,
+        open: HardwareBuild::Bytes(open_dynamixel_sim),
+    },
+};
+
+fn open_dynamixel_sim(p: &Params, _: Capacity) -> Result<OpenedHardware<u8>, BuildError> {
+    let baud = crate::kinds::baud(p)?;
+    let cfg = DxlSimConfig {
+        ids: id_list(p, "ids")?,
+        baud,
+        return_delay_us: p.int_as("return_delay_us")?,
+        baud_timing: p.bool("baud_timing")?,
+        tau_s: p.float("tau_s")?,
+        ..DxlSimConfig::default()
+    };
+    let down = FaultConfig {
+        corrupt: p.float("corrupt")?,
+        drop: p.float("drop")?,
+        seed: p.int_as("seed")?,
+        ..FaultConfig::default()
+    };
+    let up = FaultConfig {
+        seed: down.seed ^ 0x5EED,
+        ..down
+    };
+    Ok(OpenedHardware::new(DxlSimHardware::new(cfg, down, up)).at_baud(baud))
+}
+
+/// The `can_sim` hardware kind.
+pub const CAN_SIM: KindSpec = KindSpec {
+    kind: "can_sim",
+    params: &[
+        ParamSpec::text("mit", Some(""), "MIT-mode motor IDs, comma-separated"),
+        ParamSpec::text("odrive", Some(""), "ODrive node IDs, comma-separated"),
+        ParamSpec::names(
+            "model",
+            Some("ak80-9"),
+            crate::protocol_stage::MIT_MODEL_NAMES,
+            "MIT motor model (ranges)",
+        ),
+        ParamSpec::int(
+            "latency_us",
+            Some(150),
+            0.0,
+            1_000_000.0,
+            "delay of the motors' answers (µs)",
+        ),
+        ParamSpec::int(
+            "heartbeat_ms",
+            Some(100),
+            0.0,
+            100_000.0,
+            "ODrive heartbeat period (ms, 0 = off)",
+        ),
+    ],
+    doc: "An in-process CAN bus with simulated MIT-mode motors and ODrive axes.",
+    build: Build::Hardware {
+        resource: None,
+        open: HardwareBuild::Can(open_can_sim),
+    },
+};
+
+fn open_can_sim(p: &Params, _: Capacity) -> Result<OpenedHardware<CanFrame>, BuildError> {
+    let limits = crate::protocol_stage::mit_model(p, "model")?;
+    let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
+    for id in id_list(p, "mit")? {
+        nodes.push(Box::new(super::can_motors::MitMotorSim::new(
+            id, limits, 0, false,
+        )));
+    }
+    let heartbeat_ms = p.int_as("heartbeat_ms")?;
+    for n in id_list(p, "odrive")? {
+        nodes.push(Box::new(super::can_motors::OdriveAxisSim::new(
+            n,
+            heartbeat_ms,
+            0,
+        )));
+    }
+    let latency_us: u64 = p.int_as("latency_us")?;
+    Ok(OpenedHardware::new(CanSimHardware::new(
+        nodes,
+        latency_us * 1000,
+    )))
 }

@@ -11,7 +11,7 @@
 //!   (`conductor-sim`).
 //! * [`socketcan_bus`]: the CAN motors on a real SocketCAN interface (vcan0 in the CAN VM).
 
-mod basic;
+pub(crate) mod basic;
 pub mod can_motors;
 pub mod dxl;
 pub mod fault;
@@ -19,5 +19,6 @@ pub mod hardware;
 pub mod runner;
 pub mod slcan_adapter;
 pub mod socketcan_bus;
+mod worker;
 
 pub use basic::{LoopbackHardware, SimDevice, SimKind, SimProtocol, SimWord, SineHardware};

@@ -10,13 +10,13 @@
 //! [`Running::replug`]): the USB adapter leaves and comes back at the same path while the
 //! servos or motors behind it stay powered and keep their state.
 
+use super::worker::Worker;
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
 use std::os::unix::io::{AsRawFd, RawFd};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use serialport::{SerialPort, TTYPort};
@@ -289,8 +289,7 @@ pub struct Running<S> {
     sim: Arc<Mutex<S>>,
     faults: Arc<Faults>,
     lag: Arc<AtomicU64>,
-    stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    worker: Worker,
     endpoint: String,
     plug: Arc<Plug>,
     replug: Replug,
@@ -321,7 +320,6 @@ impl<S: Send + 'static> Running<S> {
         };
         let sim = Arc::new(Mutex::new(sim));
         let faults = Arc::new(Faults::default());
-        let stop = Arc::new(AtomicBool::new(false));
         let plug = Arc::new(Plug::default());
         lock(&plug.state).plugged = true;
         let t0 = Instant::now();
@@ -332,17 +330,14 @@ impl<S: Send + 'static> Running<S> {
             t0,
             lag: lag.clone(),
         };
-        let (s2, f2, st2) = (sim.clone(), faults.clone(), stop.clone());
-        let thread = std::thread::Builder::new()
-            .name(name.into())
-            .spawn(move || serve(io, &s2, &f2, &st2))
+        let (s2, f2) = (sim.clone(), faults.clone());
+        let worker = Worker::spawn(name.into(), move |stop| serve(io, &s2, &f2, &stop))
             .expect("spawn simulator thread");
         Running {
             sim,
             faults,
             lag,
-            stop,
-            thread: Some(thread),
+            worker,
             endpoint,
             plug,
             replug,
@@ -453,7 +448,7 @@ impl<S> Running<S> {
         let deadline = Instant::now() + PLUG_WAIT;
         while st.request.is_some() || st.busy {
             let left = deadline.saturating_duration_since(Instant::now());
-            if left.is_zero() || self.thread.as_ref().is_none_or(|t| t.is_finished()) {
+            if left.is_zero() || self.worker.is_finished() {
                 st.request = None;
                 return false;
             }
@@ -469,20 +464,7 @@ impl<S> Running<S> {
 
     /// Stops the thread.
     pub fn stop(mut self) {
-        self.halt();
-    }
-
-    fn halt(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-impl<S> Drop for Running<S> {
-    fn drop(&mut self) {
-        self.halt();
+        self.worker.halt();
     }
 }
 

@@ -7,10 +7,10 @@
 //! a USB-CAN adapter does): the motors stay powered and keep their state, and the simulator
 //! opens the interface again as soon as it is back up.
 
+use super::worker::Worker;
 use std::io;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use conductor_protocols::can::CanFrame;
@@ -26,11 +26,10 @@ const POLL: Duration = Duration::from_millis(5);
 /// Simulated CAN nodes on a SocketCAN interface.
 pub struct SocketCanSim {
     nodes: Arc<Mutex<Vec<Box<dyn CanNode>>>>,
-    stop: Arc<AtomicBool>,
     reopens: Arc<AtomicU64>,
     frames_in: Arc<AtomicU64>,
     frames_out: Arc<AtomicU64>,
-    thread: Option<JoinHandle<()>>,
+    worker: Worker,
     iface: String,
 }
 
@@ -47,30 +46,30 @@ impl SocketCanSim {
     pub fn start(iface: &str, nodes: Vec<Box<dyn CanNode>>) -> io::Result<Self> {
         let socket = open(iface)?;
         let nodes = Arc::new(Mutex::new(nodes));
-        let stop = Arc::new(AtomicBool::new(false));
         let reopens = Arc::new(AtomicU64::new(0));
         let frames_in = Arc::new(AtomicU64::new(0));
         let frames_out = Arc::new(AtomicU64::new(0));
-        let serve = Serve {
-            iface: iface.to_string(),
-            socket: Some(socket),
-            nodes: nodes.clone(),
-            stop: stop.clone(),
-            reopens: reopens.clone(),
-            frames_in: frames_in.clone(),
-            frames_out: frames_out.clone(),
-            t0: Instant::now(),
-        };
-        let thread = std::thread::Builder::new()
-            .name(format!("cansim-{iface}"))
-            .spawn(move || serve.run())?;
+        let (name, nodes2) = (iface.to_string(), nodes.clone());
+        let (r2, i2, o2) = (reopens.clone(), frames_in.clone(), frames_out.clone());
+        let worker = Worker::spawn(format!("cansim-{iface}"), move |stop| {
+            Serve {
+                iface: name,
+                socket: Some(socket),
+                nodes: nodes2,
+                stop,
+                reopens: r2,
+                frames_in: i2,
+                frames_out: o2,
+                t0: Instant::now(),
+            }
+            .run()
+        })?;
         Ok(Self {
             nodes,
-            stop,
             reopens,
             frames_in,
             frames_out,
-            thread: Some(thread),
+            worker,
             iface: iface.to_string(),
         })
     }
@@ -102,20 +101,7 @@ impl SocketCanSim {
 
     /// Stops the thread.
     pub fn stop(mut self) {
-        self.halt();
-    }
-
-    fn halt(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(t) = self.thread.take() {
-            let _ = t.join();
-        }
-    }
-}
-
-impl Drop for SocketCanSim {
-    fn drop(&mut self) {
-        self.halt();
+        self.worker.halt();
     }
 }
 

@@ -22,7 +22,7 @@ use conductor_bus::{
     histogram, monotonic_ns, status, Bus, CommandFrame, Domain, ExecutorStats, RtIpc, StateSample,
     StateSubscriber, StatsSubscriber,
 };
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_protocols::mit_can::{decode_command, MotorCommand};
 use embedded_can::Frame;
 use iceoryx2::port::subscriber::Subscriber;

@@ -15,7 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use conductor_devices::protocol::mit_limits;
+use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim};
 use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
 use conductor_devices::sim::fault::{FaultConfig, FaultTotals};

@@ -2,7 +2,7 @@
 
 use std::ops::Range;
 
-use conductor_devices::kinds::{self, Medium, Stage};
+use conductor_devices::kinds::{self, Medium, Role};
 use conductor_devices::{Credential, Startup};
 
 use super::super::diag::one_of;
@@ -34,7 +34,7 @@ pub(super) fn hardware(
     base: Option<f64>,
 ) -> HwOut {
     let name_ok = check_name(&mut cx.d, "hardware", &t.path.clone(), name);
-    let spec = kind_spec(cx, t, Stage::Hardware, "hardware");
+    let spec = kind_spec(cx, t, Role::Hardware, "hardware");
     let div = divisor(&mut cx.d, t, base);
     let params = spec.and_then(|s| kind_params(&mut cx.d, t, s));
     let accepted = accepted(HARDWARE_KEYS, spec);
@@ -45,9 +45,9 @@ pub(super) fn hardware(
         }
     }
     t.finish(&mut cx.d, &accepted);
-    let medium = spec.and_then(|s| s.medium);
+    let medium = spec.and_then(|s| s.medium());
     if let (Some(s), Some(p)) = (spec, params.as_ref()) {
-        if let Some(res) = s.resource {
+        if let Some(res) = s.resource() {
             if let Ok(v) = p.str(res) {
                 cx.resources.push(Resource {
                     value: v.to_string(),
@@ -65,7 +65,7 @@ pub(super) fn hardware(
             kind: s.kind.to_string(),
             divisor,
             params,
-            simulated: s.medium == Some(Medium::Sim),
+            simulated: s.medium() == Some(Medium::Sim),
         }),
         _ => None,
     };
@@ -84,7 +84,7 @@ pub(super) fn protocol(
     hw_users: &mut [Option<String>],
 ) -> ProtoOut {
     let name_ok = check_name(&mut cx.d, "protocol", &t.path.clone(), name);
-    let spec = kind_spec(cx, t, Stage::Protocol, "protocol");
+    let spec = kind_spec(cx, t, Role::Protocol, "protocol");
     let target = t.req_str(&mut cx.d, "hardware", "the name of the hardware it runs on");
     let hw_index = target
         .as_ref()
@@ -103,7 +103,7 @@ pub(super) fn protocol(
             None => hw_users[i] = Some(name.value.clone()),
         }
         if let (Some(s), Some(hm)) = (spec, hw[i].medium) {
-            if s.medium.is_some_and(|pm| pm != hm) {
+            if s.medium().is_some_and(|pm| pm != hm) {
                 cx.d.error(
                     &h.span,
                     &t.key_path("hardware"),
@@ -111,7 +111,7 @@ pub(super) fn protocol(
                         "protocol kind {:?} speaks {} but hardware {:?} carries {}; expected a \
                          hardware of the same medium",
                         s.kind,
-                        s.medium.map_or("?", Medium::name),
+                        s.medium().map_or("?", Medium::name),
                         h.value,
                         hm.name()
                     ),
@@ -156,14 +156,14 @@ pub(super) fn device(
     creds: &mut Vec<(usize, Credential, String)>,
 ) -> (Option<DeviceDef>, SafePending) {
     let name_ok = check_name(&mut cx.d, "device", &t.path.clone(), name);
-    let spec = kind_spec(cx, t, Stage::Device, "device");
+    let spec = kind_spec(cx, t, Role::Device, "device");
     let target = t.req_str(&mut cx.d, "protocol", "the name of the protocol it sits on");
     let proto = target
         .as_ref()
         .and_then(|p| link(&mut cx.d, t, "protocol", p, proto_names, "protocol", sub));
     if let (Some(i), Some(s), Some(p)) = (proto, spec, target.as_ref()) {
         if let Some(pk) = &protos[i].kind {
-            if !s.protocols.contains(&pk.as_str()) {
+            if !s.protocols().contains(&pk.as_str()) {
                 cx.d.error(
                     &p.span,
                     &t.key_path("protocol"),
@@ -172,7 +172,7 @@ pub(super) fn device(
                          protocol of kind: {}",
                         s.kind,
                         p.value,
-                        one_of(s.protocols)
+                        one_of(s.protocols())
                     ),
                 );
             }
@@ -221,7 +221,7 @@ pub(super) fn device(
     );
     let mut safe_state = t.str(&mut cx.d, "safe_state");
     let supported: &[&str] = match spec {
-        Some(s) if !s.safe_actions.is_empty() => s.safe_actions,
+        Some(s) if !s.safe_actions().is_empty() => s.safe_actions(),
         _ => &["hold", "torque_off", "setpoint"],
     };
     let chosen = action

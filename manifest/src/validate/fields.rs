@@ -4,7 +4,7 @@
 use std::collections::BTreeMap;
 
 use conductor_bus::naming;
-use conductor_devices::kinds::{KindSpec, ParamType, ParamValue, Params, Stage};
+use conductor_devices::kinds::{KindSpec, ParamType, ParamValue, Params, Role};
 use toml::de::DeValue;
 
 use super::super::diag::{hint, one_of, Diags};
@@ -79,25 +79,25 @@ pub(super) fn divisor(d: &mut Diags, t: &mut Table, base: Option<f64>) -> Option
     Some(n as u32)
 }
 
-/// Looks up the kind named by `kind` for `stage`.
+/// Looks up the kind named by `kind` in `role`.
 pub(super) fn kind_spec<'k>(
     cx: &mut Ctx<'k, '_>,
     t: &mut Table,
-    stage: Stage,
+    role: Role,
     what: &str,
 ) -> Option<&'k KindSpec> {
     let kind = t.req_str(&mut cx.d, "kind", &format!("the {what} kind, a string"))?;
     let found = cx
         .kinds
         .iter()
-        .find(|k| k.stage == stage && k.kind == kind.value);
+        .find(|k| k.role() == role && k.kind == kind.value);
     match found {
         Some(spec) => Some(spec),
         None => {
             let known: Vec<&str> = cx
                 .kinds
                 .iter()
-                .filter(|k| k.stage == stage)
+                .filter(|k| k.role() == role)
                 .map(|k| k.kind)
                 .collect();
             let hint = hint(&kind.value, &known);

@@ -8,6 +8,7 @@ use super::super::busload::{BusLoad, Part, Wire, MAX_LOAD, WARN_LOAD};
 use super::super::diag::Diags;
 use super::super::Subsystem;
 use super::fields::fmt_num;
+use conductor_devices::protocol_stage::Dxl2ReadMode;
 
 /// Checks every bus of `sub`; `protocols[i]` is where protocol `i`'s table starts and its key.
 pub(super) fn check(d: &mut Diags, sub: &Subsystem, protocols: &[(Range<usize>, String)]) {
@@ -126,7 +127,7 @@ fn advice(sub: &Subsystem, load: &BusLoad) -> String {
             if p.params.int("return_delay_us").unwrap_or(0) > 0 {
                 a.push("set the servos' Return Delay Time to 0 (and return_delay_us = 0)".into());
             }
-            if p.kind == "dynamixel2" && p.params.str("read").unwrap_or("") != "fast_sync" {
+            if p.kind == "dynamixel2" && p.params.choice("read").ok() != Some(Dxl2ReadMode::Fast) {
                 a.push(
                     "read with read = \"fast_sync\" (one combined reply; X430/540 firmware ≥ 45)"
                         .into(),

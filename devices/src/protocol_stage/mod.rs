@@ -7,19 +7,20 @@
 //! | [`Dxl1Protocol`] | `u8` | writes → SYNC WRITE per register; reads → one BULK READ (MX) or one READ per bus window (AX) |
 //! | [`CanMotorProtocol`] | CAN frame | one frame per device and tick (MIT command, ODrive message or RTR request), all sent together |
 //!
-//! The two Dynamixel stages are one stage (`register_stage`) over one bus core (`register`:
+//! The two Dynamixel stages are one stage (`register_bus`) over one bus core (`transactions`:
 //! queues, coalescing, transactions, deadlines, reply matching); each protocol adds only its
 //! dialect: the encoders, the read instruction, the scanner and how its error byte reads.
 
-mod can;
-mod dxl1;
-mod dxl2;
-mod register;
-mod register_stage;
+pub(crate) mod can_motors;
+pub(crate) mod dxl1;
+pub(crate) mod dxl2;
+mod register_bus;
+mod transactions;
 
-pub use can::{
-    mit_limits, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError, MIT_MODELS,
+pub use can_motors::{
+    mit_limits, mit_model, odrive_get, parse_model_table, CanMotorProtocol, ModelTableError,
+    MIT_MODELS, MIT_MODEL_NAMES,
 };
 pub use dxl1::{Dxl1Protocol, Dxl1ReadMode};
 pub use dxl2::{fast_read_fits, fast_reply_len, Dxl2Protocol, Dxl2ReadMode};
-pub use register::{wire_ns, Timing};
+pub use transactions::{wire_ns, Timing};

@@ -27,9 +27,9 @@
 //!   told from that instruction's answer (a status packet carries no sequence number); the
 //!   timeout must cover the adapter's latency (see `timeout_us`).
 
+use crate::component::ProtocolCounters;
 use crate::message::{Credential, Op, Reply, ReplyData, Request};
 use crate::queue::Bounded;
-use crate::stage::ProtocolCounters;
 
 /// Nanoseconds to send `bytes` 8N1 bytes (10 bits each) at `baud`.
 pub fn wire_ns(bytes: usize, baud: u32) -> u64 {

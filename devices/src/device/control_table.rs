@@ -8,7 +8,7 @@
 //! checksum one in 256. A value outside its register's physical range is therefore treated as
 //! damaged: the channel goes stale and the rejection is counted, never delivered.
 
-use crate::stage::{Channel, SafeAction};
+use crate::component::{Channel, SafeAction};
 
 /// How raw register values are encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

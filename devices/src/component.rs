@@ -1,5 +1,5 @@
-//! The three communication stages (thesis §2.4) as traits, and [`Link`], the pairing of a
-//! protocol with the hardware it runs on.
+//! The three components of a link (thesis §2.4) as traits: [`Hardware`], [`Protocol`] (a
+//! protocol stage) and [`Device`], with the types they exchange (see docs/vocabulary.md).
 //!
 //! The executor calls every method here on its real-time thread: implementations must not
 //! block, allocate or lock. Buffers are sized when a component is built.
@@ -173,6 +173,38 @@ pub trait Hardware {
     }
     /// Puts the bus in a quiet state on shutdown (flush, close).
     fn shutdown(&mut self) {}
+}
+
+/// A boxed hardware is hardware: what a link built by kind holds, whatever the transport.
+impl<H: Hardware + ?Sized> Hardware for Box<H> {
+    type Word = H::Word;
+    fn transmit(&mut self, words: &[Self::Word], ctx: TickCtx) -> Result<usize, HwError> {
+        (**self).transmit(words, ctx)
+    }
+    fn receive(&mut self, out: &mut [Self::Word], ctx: TickCtx) -> Result<usize, HwError> {
+        (**self).receive(out, ctx)
+    }
+    fn rx_unconfirmed(&self) -> &[u32] {
+        (**self).rx_unconfirmed()
+    }
+    fn rx_times(&self) -> &[u64] {
+        (**self).rx_times()
+    }
+    fn condition(&self) -> BusCondition {
+        (**self).condition()
+    }
+    fn preempt(&mut self) {
+        (**self).preempt()
+    }
+    fn flushed(&self) -> bool {
+        (**self).flushed()
+    }
+    fn counters(&self) -> HwCounters {
+        (**self).counters()
+    }
+    fn shutdown(&mut self) {
+        (**self).shutdown()
+    }
 }
 
 /// Counters a protocol keeps about its bus.

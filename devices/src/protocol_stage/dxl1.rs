@@ -6,8 +6,8 @@ use conductor_protocols::dynamixel1::{
     self as dxl, BulkReadEntry, Dxl1Framing, ErrorBits, Packet, Status,
 };
 
-use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
-use super::register_stage::{protocol_over_stage, Dialect, ReadTxn, Stage};
+use super::register_bus::{protocol_over_register_bus, Dialect, ReadTxn, RegisterBus};
+use super::transactions::{Core, Entry, ReadShape, StatusErr, Timing};
 use crate::message::Reply;
 use crate::queue::Bounded;
 
@@ -22,7 +22,7 @@ pub enum Dxl1ReadMode {
 
 /// Dynamixel 1.0 protocol stage. Word = byte.
 pub struct Dxl1Protocol {
-    stage: Stage<Dxl1, 512>,
+    stage: RegisterBus<Dxl1, 512>,
 }
 
 impl std::fmt::Debug for Dxl1Protocol {
@@ -47,7 +47,7 @@ impl Dxl1Protocol {
         let devices = devices.clamp(1, 254);
         let dialect = Dxl1 { mode };
         Self {
-            stage: Stage::new(
+            stage: RegisterBus::new(
                 dialect,
                 timing,
                 dxl::MAX_DEVICE_ID,
@@ -136,13 +136,30 @@ impl Dialect for Dxl1 {
     }
 }
 
-protocol_over_stage!(Dxl1Protocol);
+protocol_over_register_bus!(Dxl1Protocol);
+
+crate::choices!(Dxl1ReadMode { Bulk = "bulk", Single = "single" });
+
+/// The `dynamixel1` protocol kind.
+pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
+    kind: "dynamixel1",
+    params: &[
+        crate::kinds::ParamSpec::choice::<Dxl1ReadMode>("read", "bulk", "one BULK READ for all servos (MX series) or one READ per bus window, round robin (AX series)"),
+        crate::kinds::RETURN_DELAY_US,
+        crate::kinds::TIMEOUT_US,
+    ],
+    doc: "ROBOTIS Dynamixel Protocol 1.0 (AX/MX/RX): writes become SYNC WRITEs, reads one BULK \
+          READ (or single READs in turn).",
+    build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Bytes(|p, hw, cap| {
+        super::register_bus::link_kind(p, hw, cap, Dxl1Protocol::new)
+    })),
+};
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::component::{Protocol, TickCtx};
     use crate::message::{Credential, Op, ReplyData, Request};
-    use crate::stage::{Protocol, TickCtx};
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
         Request::new(Credential::id(id), op, ctx(tick))

@@ -8,10 +8,10 @@ use conductor_protocols::mit_can::{self, Command, Limits, Model, SpecialCommand}
 use conductor_protocols::odrive_can::{self, CmdId, Message};
 use embedded_can::{Frame, Id, StandardId};
 
+use crate::component::{Protocol, ProtocolCounters, TickCtx};
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request};
 use crate::outstanding::{Outstanding, Pending};
 use crate::queue::Bounded;
-use crate::stage::{Protocol, ProtocolCounters, TickCtx};
 
 /// The MIT-mode model names the manifest accepts, with their ranges.
 pub const MIT_MODELS: &[(&str, Model)] = &[
@@ -314,4 +314,65 @@ impl Protocol for CanMotorProtocol {
 /// An ODrive "get" message for `cmd`, with zeroed fields (the request carries no data).
 pub fn odrive_get(cmd: CmdId) -> Option<Message> {
     Message::decode(cmd, &[0; 8]).ok().filter(|_| is_get(cmd))
+}
+
+/// The names of [`MIT_MODELS`], for the kinds' `model` parameters.
+pub const MIT_MODEL_NAMES: &[&str] = &[
+    "ak10-9",
+    "ak60-6",
+    "ak70-10",
+    "ak80-6",
+    "ak80-9",
+    "ak80-64",
+    "mini-cheetah",
+];
+
+/// The ranges of the MIT model named in parameter `name`.
+pub fn mit_model(p: &crate::kinds::Params, name: &str) -> Result<Limits, crate::kinds::BuildError> {
+    let model = p.str(name)?;
+    mit_limits(model).ok_or_else(|| {
+        crate::kinds::BuildError::invalid(
+            name,
+            crate::kinds::Invalid::Name {
+                value: model.into(),
+                names: MIT_MODEL_NAMES,
+            },
+        )
+    })
+}
+
+/// The `can_motors` protocol kind.
+pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
+    kind: "can_motors",
+    params: &[
+        crate::kinds::ParamSpec::names("model", Some("ak80-9"), MIT_MODEL_NAMES, "ranges of the MIT-mode motors"),
+        crate::kinds::ParamSpec::text("models", Some(""), "per-motor overrides, e.g. \"1=ak80-9,2=ak10-9\""),
+        crate::kinds::ParamSpec::int("master_id", Some(0), 0.0, 2047.0, "CAN ID the MIT motors reply on (CAN_MASTER)"),
+        crate::kinds::TIMEOUT_US,
+    ],
+    doc: "MIT-mode motors and ODrive axes (CAN Simple 0.6) on one classic CAN bus: one frame per \
+          device and tick, all of a tick's frames sent together; MIT replies matched by the motor ID \
+          in the payload, ODrive replies by node ID; cyclic ODrive messages are passed on.",
+    build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Can(|p, hw, cap| {
+        let table = parse_model_table(p.str("models")?)
+            .map_err(|e| crate::kinds::BuildError::invalid("models", e))?;
+        let timeout_us: u64 = p.int_as("timeout_us")?;
+        let stage = CanMotorProtocol::new(
+            mit_model(p, "model")?,
+            table,
+            p.int_as("master_id")?,
+            timeout_us * 1000,
+            cap.in_flight,
+        );
+        hw.link(stage, cap)
+    })),
+};
+
+#[cfg(test)]
+mod kind_tests {
+    #[test]
+    fn model_names_match_the_table() {
+        let names: Vec<&str> = super::MIT_MODELS.iter().map(|m| m.0).collect();
+        assert_eq!(names, super::MIT_MODEL_NAMES);
+    }
 }

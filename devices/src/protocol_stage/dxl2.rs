@@ -8,11 +8,11 @@ use conductor_protocols::dynamixel2::{
 
 use conductor_protocols::scan::ScanStats;
 
-use super::register::{Core, Entry, ReadShape, StatusErr, Timing};
-use super::register_stage::{protocol_over_stage, Dialect, ReadTxn, Stage};
+use super::register_bus::{protocol_over_register_bus, Dialect, ReadTxn, RegisterBus};
+use super::transactions::{Core, Entry, ReadShape, StatusErr, Timing};
+use crate::component::Protocol;
 use crate::message::Reply;
 use crate::queue::Bounded;
-use crate::stage::Protocol;
 
 /// How the stage reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,7 +32,7 @@ const MAX_RECEIVED: usize = MAX_PACKET + MAX_PACKET / 3 + 1;
 
 /// Dynamixel 2.0 protocol stage. Word = byte.
 pub struct Dxl2Protocol {
-    stage: Stage<Dxl2, MAX_RECEIVED>,
+    stage: RegisterBus<Dxl2, MAX_RECEIVED>,
 }
 
 impl std::fmt::Debug for Dxl2Protocol {
@@ -64,7 +64,7 @@ impl Dxl2Protocol {
             lens: Vec::with_capacity(devices),
         };
         Self {
-            stage: Stage::new(
+            stage: RegisterBus::new(
                 dialect,
                 timing,
                 dxl::MAX_DEVICE_ID,
@@ -229,13 +229,31 @@ impl Dialect for Dxl2 {
     }
 }
 
-protocol_over_stage!(Dxl2Protocol);
+protocol_over_register_bus!(Dxl2Protocol);
+
+crate::choices!(Dxl2ReadMode { Sync = "sync", Fast = "fast_sync" });
+
+/// The `dynamixel2` protocol kind.
+pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
+    kind: "dynamixel2",
+    params: &[
+        crate::kinds::ParamSpec::choice::<Dxl2ReadMode>("read", "sync", "one SYNC READ (a status packet per servo) or one FAST SYNC READ (one combined packet, X430/540 firmware ≥ 45) per transaction; servos reading different spans get a (FAST) BULK READ"),
+        crate::kinds::RETURN_DELAY_US,
+        crate::kinds::TIMEOUT_US,
+    ],
+    doc: "ROBOTIS Dynamixel Protocol 2.0: a tick's writes become one SYNC WRITE per register, its \
+          reads one SYNC READ / FAST SYNC READ; status packets are matched to the requests by ID; \
+          missing replies make the states stale. Bus timing comes from the hardware's `baud`.",
+    build: crate::kinds::Build::Protocol(crate::kinds::ProtocolBuild::Bytes(|p, hw, cap| {
+        super::register_bus::link_kind(p, hw, cap, Dxl2Protocol::new)
+    })),
+};
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::component::TickCtx;
     use crate::message::{Credential, Op, ReplyData, Request};
-    use crate::stage::TickCtx;
 
     fn req(id: u32, op: Op, tick: u64) -> Request {
         Request::new(Credential::id(id), op, ctx(tick))

@@ -6,10 +6,10 @@
 
 use conductor_protocols::scan::{Framing, PacketScanner, ScanStats};
 
-use super::register::{Core, Entry, ReadShape, Timing};
+use super::transactions::{Core, Entry, ReadShape, Timing};
+use crate::component::{ProtocolCounters, TickCtx};
 use crate::message::{Reply, Request};
 use crate::queue::Bounded;
-use crate::stage::{ProtocolCounters, TickCtx};
 
 /// A read transaction as encoded: what it puts on the wire and what it expects back.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -61,7 +61,7 @@ pub(crate) trait Dialect {
 }
 
 /// A register-bus protocol stage over dialect `D`, scanning with an `N`-byte buffer.
-pub(crate) struct Stage<D: Dialect, const N: usize> {
+pub(crate) struct RegisterBus<D: Dialect, const N: usize> {
     core: Core,
     dialect: D,
     scanner: Box<PacketScanner<D::Framing, N>>,
@@ -71,7 +71,7 @@ pub(crate) struct Stage<D: Dialect, const N: usize> {
     entries: Vec<Entry>,
 }
 
-impl<D: Dialect, const N: usize> Stage<D, N> {
+impl<D: Dialect, const N: usize> RegisterBus<D, N> {
     /// Room for `devices` devices (IDs up to `max_id`), `in_flight` read requests and packets
     /// of `max_packet` bytes.
     pub fn new(
@@ -236,18 +236,18 @@ impl<D: Dialect, const N: usize> Stage<D, N> {
     }
 }
 
-/// `impl Protocol` for a wrapper whose `stage` field is a [`Stage`]: both Dynamixel stages are
+/// `impl Protocol` for a wrapper whose `stage` field is a [`RegisterBus`]: both Dynamixel stages are
 /// the register stage under their own public name.
-macro_rules! protocol_over_stage {
+macro_rules! protocol_over_register_bus {
     ($t:ty) => {
-        impl $crate::stage::Protocol for $t {
+        impl $crate::component::Protocol for $t {
             type Word = u8;
 
             fn encode(
                 &mut self,
                 requests: &[$crate::message::Request],
                 out: &mut $crate::queue::Bounded<u8>,
-                ctx: $crate::stage::TickCtx,
+                ctx: $crate::component::TickCtx,
             ) {
                 self.stage.encode(requests, out, ctx);
             }
@@ -257,7 +257,7 @@ macro_rules! protocol_over_stage {
                 words: &[u8],
                 fence: &[u64],
                 out: &mut $crate::queue::Bounded<$crate::message::Reply>,
-                ctx: $crate::stage::TickCtx,
+                ctx: $crate::component::TickCtx,
             ) {
                 self.stage.decode(words, fence, out, ctx.now_ns);
             }
@@ -265,12 +265,12 @@ macro_rules! protocol_over_stage {
             fn expire(
                 &mut self,
                 out: &mut $crate::queue::Bounded<$crate::message::Reply>,
-                ctx: $crate::stage::TickCtx,
+                ctx: $crate::component::TickCtx,
             ) {
                 self.stage.expire(out, ctx);
             }
 
-            fn counters(&self) -> $crate::stage::ProtocolCounters {
+            fn counters(&self) -> $crate::component::ProtocolCounters {
                 self.stage.counters()
             }
 
@@ -284,4 +284,30 @@ macro_rules! protocol_over_stage {
         }
     };
 }
-pub(crate) use protocol_over_stage;
+pub(crate) use protocol_over_register_bus;
+
+/// Builds a Dynamixel protocol kind's stage with `new` (its bus timing from the kind's
+/// `return_delay_us` and `timeout_us` at the hardware's line speed, its `read` mode) and binds
+/// it to the hardware.
+pub(crate) fn link_kind<S, M>(
+    p: &crate::kinds::Params,
+    hw: crate::kinds::OpenedHardware<u8>,
+    cap: crate::kinds::Capacity,
+    new: fn(Timing, M, usize, usize) -> S,
+) -> Result<Box<dyn crate::Link>, crate::kinds::BuildError>
+where
+    S: crate::component::Protocol<Word = u8> + 'static,
+    M: crate::kinds::Choice,
+{
+    let (delay_us, timeout_us): (u64, u64) =
+        (p.int_as("return_delay_us")?, p.int_as("timeout_us")?);
+    let timing = Timing {
+        baud: hw.baud(),
+        return_delay_ns: delay_us * 1000,
+        timeout_ns: timeout_us * 1000,
+    };
+    hw.link(
+        new(timing, p.choice("read")?, cap.devices, cap.in_flight),
+        cap,
+    )
+}
