@@ -12,7 +12,5 @@
 //!
 //! See `examples/README.md` for how to run each.
 
-#![warn(missing_docs)]
-
 pub mod motor;
 pub mod sim;
