@@ -17,7 +17,7 @@
 /// Declares an enum of one-byte protocol codes and both directions of its mapping once (see the
 /// [module](crate::code_table) docs for what each form generates).
 ///
-/// ```ignore
+/// ```text
 /// code_table! {
 ///     /// Instruction codes.
 ///     #[derive(Debug, Clone, Copy, PartialEq, Eq)]
