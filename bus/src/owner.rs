@@ -41,6 +41,25 @@ impl StateSpec {
             buffer: qos::STATE_BUFFER,
         }
     }
+
+    /// One spec per name with the default buffer, numbered in order (`meta.index` = position,
+    /// as [`StatePublisher::create`] requires) and otherwise `meta`.
+    pub fn numbered<N: Into<String>>(
+        names: impl IntoIterator<Item = N>,
+        meta: &StateMeta,
+    ) -> Vec<Self> {
+        names
+            .into_iter()
+            .enumerate()
+            .map(|(i, name)| {
+                let meta = StateMeta {
+                    index: i as u32,
+                    ..meta.clone()
+                };
+                Self::new(name, meta)
+            })
+            .collect()
+    }
 }
 
 /// Publishes every state of one subsystem and its tick event.

@@ -73,7 +73,7 @@ impl State {
         self.sub.info()
     }
 
-    /// The newest value, ω[0].
+    /// The newest value, ω\[0\].
     pub fn value(&self) -> Result<f64> {
         self.latest
             .map(|s| s.value)
@@ -85,7 +85,7 @@ impl State {
         self.latest
     }
 
-    /// ω[t] for t seconds relative to the newest sample (see [`History::at`]).
+    /// ω\[t\] for t seconds relative to the newest sample (see [`History::at`]).
     pub fn at(&self, t: f64, interp: Interpolation) -> Result<f64> {
         self.history.at(t, interp)
     }

@@ -203,6 +203,13 @@ impl<T> Deref for Guard<'_, T> {
 impl<'parent, T: Send + Abandonable> LockGuard<'parent, T> for Guard<'parent, T> {}
 
 impl<T: Send + Debug + Abandonable> Abandonable for PooledRc<T> {
+    /// Gives up this reference without running destructors (the value is abandoned with the
+    /// last reference and its slot or box leaked), as iceoryx2 does on a crashed owner.
+    ///
+    /// # Safety
+    ///
+    /// `this` points to a live `PooledRc` on this thread that nobody uses, clones or drops
+    /// afterwards (the contract of [`Abandonable::abandon_in_place`]).
     unsafe fn abandon_in_place(this: NonNull<Self>) {
         // SAFETY: the caller guarantees `this` points to a live PooledRc.
         let this = unsafe { this.as_ref() };
@@ -276,7 +283,7 @@ mod tests {
     impl Abandonable for Probe {
         unsafe fn abandon_in_place(_: NonNull<Self>) {}
     }
-    // SAFETY (test only): the probe never leaves its thread; Send is required by the trait bound.
+    // SAFETY: (test only) the probe never leaves its thread; Send is required by the trait bound.
     unsafe impl Send for Probe {}
 
     #[test]

@@ -8,21 +8,14 @@ use conductor_bus::{
 };
 
 fn owner(bus: &Bus, names: &[&str]) -> (StatePublisher, CommandReceiver) {
-    let specs: Vec<StateSpec> = names
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            StateSpec::new(
-                *n,
-                StateMeta {
-                    index: i as u32,
-                    writable: true,
-                    rate_hz: 100.0,
-                    ..Default::default()
-                },
-            )
-        })
-        .collect();
+    let specs = StateSpec::numbered(
+        names.iter().copied(),
+        &StateMeta {
+            writable: true,
+            rate_hz: 100.0,
+            ..Default::default()
+        },
+    );
     (
         StatePublisher::create(bus, "sys", &specs).unwrap(),
         CommandReceiver::create(bus, "sys").unwrap(),

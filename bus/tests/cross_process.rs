@@ -2,31 +2,22 @@
 
 mod support;
 
-use std::thread::sleep;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use conductor_bus::{Bus, Controller, Domain, StateSubscriber, MAX_SETPOINTS};
 use support::{parse_report, Peer};
 
 /// Polls `f` until it returns Some or `secs` pass.
-fn eventually<T>(secs: u64, mut f: impl FnMut() -> Option<T>) -> T {
-    let end = Instant::now() + Duration::from_secs(secs);
-    loop {
-        if let Some(v) = f() {
-            return v;
-        }
-        assert!(Instant::now() < end, "condition not met within {secs} s");
-        sleep(Duration::from_millis(20));
-    }
+fn eventually<T>(secs: u64, f: impl FnMut() -> Option<T>) -> T {
+    conductor_testkit::eventually(Duration::from_secs(secs), "condition", f)
 }
 
-#[test]
-fn ten_thousand_samples_cross_processes_without_loss() {
-    let d = Domain::unique("noloss").unwrap();
-    // Paced at 10 kHz with a 2048-deep queue: the subscriber may stall up to 200 ms and lose
-    // nothing, which is the configured buffer's promise.
-    let publisher = Peer::start(
-        &d,
+/// A peer publishing `count` counter samples of `arm/q` at `rate` Hz through a `buffer`-deep
+/// queue, starting once one subscriber is there.
+fn counting_publisher(d: &Domain, rate: u32, count: u32, buffer: usize) -> Peer {
+    let (rate, count, buffer) = (rate.to_string(), count.to_string(), buffer.to_string());
+    Peer::start(
+        d,
         &[
             "publish",
             "--subsystem",
@@ -34,17 +25,25 @@ fn ten_thousand_samples_cross_processes_without_loss() {
             "--states",
             "q",
             "--rate",
-            "10000",
+            &rate,
             "--count",
-            "10000",
+            &count,
             "--counter",
             "--buffer",
-            "2048",
+            &buffer,
             "--wait-subscribers",
             "1",
         ],
     )
-    .ready();
+    .ready()
+}
+
+#[test]
+fn ten_thousand_samples_cross_processes_without_loss() {
+    let d = Domain::unique("noloss").unwrap();
+    // Paced at 10 kHz with a 2048-deep queue: the subscriber may stall up to 200 ms and lose
+    // nothing, which is the configured buffer's promise.
+    let publisher = counting_publisher(&d, 10000, 10000, 2048);
     let sub = Peer::start(
         &d,
         &["subscribe", "arm/q", "--count", "10000", "--buffer", "2048"],
@@ -60,26 +59,7 @@ fn ten_thousand_samples_cross_processes_without_loss() {
 #[test]
 fn slow_subscriber_sees_sequence_gaps() {
     let d = Domain::unique("gaps").unwrap();
-    let publisher = Peer::start(
-        &d,
-        &[
-            "publish",
-            "--subsystem",
-            "arm",
-            "--states",
-            "q",
-            "--rate",
-            "2000",
-            "--count",
-            "2000",
-            "--counter",
-            "--buffer",
-            "8",
-            "--wait-subscribers",
-            "1",
-        ],
-    )
-    .ready();
+    let publisher = counting_publisher(&d, 2000, 2000, 8);
     // 8-deep queue, 5 ms per sample against 0.5 ms publishing: most samples are overwritten.
     let sub = Peer::start(
         &d,

@@ -19,20 +19,13 @@ fn publishing_and_draining_allocate_nothing() {
 
     let d = Domain::unique("noalloc").unwrap();
     let bus = Bus::open(&d, "owner").unwrap();
-    let specs: Vec<StateSpec> = ["a", "b", "c"]
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            StateSpec::new(
-                *n,
-                StateMeta {
-                    index: i as u32,
-                    writable: true,
-                    ..Default::default()
-                },
-            )
-        })
-        .collect();
+    let specs = StateSpec::numbered(
+        ["a", "b", "c"],
+        &StateMeta {
+            writable: true,
+            ..Default::default()
+        },
+    );
     let mut publisher = StatePublisher::create(&bus, "sys", &specs).unwrap();
     let mut commands = CommandReceiver::create(&bus, "sys").unwrap();
     let mut sub = StateSubscriber::with_buffer(&bus, "sys/a", 64).unwrap();

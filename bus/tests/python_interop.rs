@@ -51,24 +51,18 @@ fn python_subscribes_and_commands_through_the_documented_abi() {
 
     let d = Domain::unique("py").unwrap();
     let bus = Bus::open(&d, "rust-side").unwrap();
-    let specs: Vec<StateSpec> = ["counter", "b", "c"]
-        .iter()
-        .enumerate()
-        .map(|(i, n)| {
-            StateSpec::new(
-                *n,
-                StateMeta {
-                    index: i as u32,
-                    units: "rad".into(),
-                    writable: true,
-                    rate_hz: 500.0,
-                    min: -5.0,
-                    max: 5.0,
-                    device: "dev".into(),
-                },
-            )
-        })
-        .collect();
+    let specs = StateSpec::numbered(
+        ["counter", "b", "c"],
+        &StateMeta {
+            index: 0,
+            units: "rad".into(),
+            writable: true,
+            rate_hz: 500.0,
+            min: -5.0,
+            max: 5.0,
+            device: "dev".into(),
+        },
+    );
     let mut publisher = StatePublisher::create(&bus, "py", &specs).unwrap();
     let mut commands = CommandReceiver::create(&bus, "py").unwrap();
 

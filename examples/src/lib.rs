@@ -14,8 +14,6 @@
 //!
 //! See `examples/README.md` for how to run each.
 
-#![warn(missing_docs)]
-
 pub mod minihubo;
 pub mod motor;
 pub mod sim;

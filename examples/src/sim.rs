@@ -1,6 +1,7 @@
 //! A simulated executor: owns the states of one subsystem, applies command frames the way the
 //! real executor does (limits clamp and flag, NaN/inf and read-only refused), steps a [`Plant`]
-//! at a fixed rate and publishes samples, tick events and [`ExecutorStats`].
+//! at a fixed rate and publishes samples, tick events and
+//! [`ExecutorStats`](conductor_bus::ExecutorStats).
 //!
 //! The examples run against it (`sim-motor`), and the CLI's integration tests use it as the
 //! publisher they inspect, command, record and replay. It is a test stand-in, not the executor:

@@ -38,37 +38,32 @@ fn run_json(cmd: &mut Command) -> serde_json::Value {
     })
 }
 
-#[test]
-fn pid_controller_holds_the_motor_at_its_target() {
-    let d = Domain::unique("pid").unwrap();
+/// Runs `controller` for 3 s with a 1 rad target against the simulated motor on a fresh
+/// domain; checks on the bus that the motor got there and returns the controller's report.
+fn step_to_one_radian(domain: &str, controller: &mut Command) -> serde_json::Value {
+    let d = Domain::unique(domain).unwrap();
     let _sim = sim::spawn(&d, motor::spec(500.0), motor::Motor::default()).unwrap();
-    let r = run_json(Command::new(env!("CARGO_BIN_EXE_pid-controller")).args([
-        "--domain",
-        d.name(),
-        "--target",
-        "1",
-        "--seconds",
-        "3",
-    ]));
-    assert!(r["frames"].as_u64().unwrap() > 100, "{r}");
+    let r = run_json(controller.args(["--domain", d.name(), "--target", "1", "--seconds", "3"]));
     let theta = position(&d);
     assert!((theta - 1.0).abs() < 0.01, "position {theta}; {r}");
+    r
+}
+
+#[test]
+fn pid_controller_holds_the_motor_at_its_target() {
+    let r = step_to_one_radian(
+        "pid",
+        &mut Command::new(env!("CARGO_BIN_EXE_pid-controller")),
+    );
+    assert!(r["frames"].as_u64().unwrap() > 100, "{r}");
 }
 
 #[test]
 fn state_observer_estimates_velocity_and_holds_the_target() {
-    let d = Domain::unique("observer").unwrap();
-    let _sim = sim::spawn(&d, motor::spec(500.0), motor::Motor::default()).unwrap();
-    let r = run_json(Command::new(env!("CARGO_BIN_EXE_state-observer")).args([
-        "--domain",
-        d.name(),
-        "--target",
-        "1",
-        "--seconds",
-        "3",
-    ]));
-    let theta = position(&d);
-    assert!((theta - 1.0).abs() < 0.01, "position {theta}; {r}");
+    let r = step_to_one_radian(
+        "observer",
+        &mut Command::new(env!("CARGO_BIN_EXE_state-observer")),
+    );
     // The observer's model is the simulator's exact discretisation, so the velocity estimate is
     // exact but for ticks where a read races the next publish (a one-step error that decays at
     // the observer poles): 5 % of the peak velocity is a generous bound for that.
@@ -80,18 +75,14 @@ fn state_observer_estimates_velocity_and_holds_the_target() {
 
 #[test]
 fn python_controller_closes_the_loop_through_iceoryx2() {
-    let d = Domain::unique("pyctl").unwrap();
-    let _sim = sim::spawn(&d, motor::spec(500.0), motor::Motor::default()).unwrap();
     // The `conductor` package of this checkout (`cargo xtask setup` also installs it).
-    let r = run_json(
+    let r = step_to_one_radian(
+        "pyctl",
         Command::new(python())
             .arg(workspace().join("examples/python/controller.py"))
-            .args(["--domain", d.name(), "--target", "1", "--seconds", "3"])
             .env("PYTHONPATH", workspace().join("python/src")),
     );
     assert!(r["frames"].as_u64().unwrap() > 100, "{r}");
-    let theta = position(&d);
-    assert!((theta - 1.0).abs() < 0.01, "position {theta}; {r}");
     // Its last setpoint, near zero at the target, was taken as sent; the plant runs no watchdog
     // and says so on the bus.
     assert_eq!(r["verdict"], "OK", "{r}");

@@ -20,12 +20,12 @@
 //! See `README.md` for how bytes flow through the crate and which vendor-manual errors it corrects.
 #![no_std]
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 #[cfg(test)]
 extern crate std;
 
 pub mod can;
+mod code_table;
 pub mod dynamixel1;
 pub mod dynamixel2;
 mod dynamixel_common;

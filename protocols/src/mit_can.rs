@@ -15,6 +15,7 @@
 //! [`Model`] or build [`Limits`] from the firmware's values.
 
 use crate::can::CanFrame;
+use crate::code_table::code_table;
 use embedded_can::{Frame, StandardId};
 
 /// A closed interval of physical values mapped onto an integer field.
@@ -326,69 +327,39 @@ pub fn decode_command(data: &[u8], l: &Limits) -> Result<MotorCommand, MitError>
     )))
 }
 
-/// Fault codes in byte 7 of an 8-byte reply (CubeMars manual p. 42).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Fault {
-    /// 1.
-    OverVoltage,
-    /// 2.
-    UnderVoltage,
-    /// 3.
-    DrvFault,
-    /// 4.
-    AbsOverCurrent,
-    /// 5.
-    FetOverTemperature,
-    /// 6.
-    MotorOverTemperature,
-    /// 7.
-    GateDriverOverVoltage,
-    /// 8.
-    GateDriverUnderVoltage,
-    /// 9.
-    McuUnderVoltage,
-    /// 10.
-    WatchdogReset,
+code_table! {
+    /// Fault codes in byte 7 of an 8-byte reply (CubeMars manual p. 42).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Fault {
+        /// 1.
+        OverVoltage = 1,
+        /// 2.
+        UnderVoltage = 2,
+        /// 3.
+        DrvFault = 3,
+        /// 4.
+        AbsOverCurrent = 4,
+        /// 5.
+        FetOverTemperature = 5,
+        /// 6.
+        MotorOverTemperature = 6,
+        /// 7.
+        GateDriverOverVoltage = 7,
+        /// 8.
+        GateDriverUnderVoltage = 8,
+        /// 9.
+        McuUnderVoltage = 9,
+        /// 10.
+        WatchdogReset = 10,
+    }
     /// Any other non-zero code.
-    Unknown(u8),
+    other Unknown(u8);
 }
 
 impl Fault {
     /// The fault for a code; `None` for 0 (no fault).
     pub fn from_code(c: u8) -> Option<Self> {
-        use Fault::*;
-        Some(match c {
-            0 => return None,
-            1 => OverVoltage,
-            2 => UnderVoltage,
-            3 => DrvFault,
-            4 => AbsOverCurrent,
-            5 => FetOverTemperature,
-            6 => MotorOverTemperature,
-            7 => GateDriverOverVoltage,
-            8 => GateDriverUnderVoltage,
-            9 => McuUnderVoltage,
-            10 => WatchdogReset,
-            n => Unknown(n),
-        })
-    }
-
-    /// The code byte.
-    pub fn code(self) -> u8 {
-        use Fault::*;
-        match self {
-            OverVoltage => 1,
-            UnderVoltage => 2,
-            DrvFault => 3,
-            AbsOverCurrent => 4,
-            FetOverTemperature => 5,
-            MotorOverTemperature => 6,
-            GateDriverOverVoltage => 7,
-            GateDriverUnderVoltage => 8,
-            McuUnderVoltage => 9,
-            WatchdogReset => 10,
-            Unknown(n) => n,
-        }
+        (c != 0).then(|| Self::from(c))
     }
 }
 

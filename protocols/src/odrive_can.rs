@@ -9,105 +9,69 @@
 //! away from zero): truncation turns 0.5 rev/s into 499.
 
 use crate::can::CanFrame;
+use crate::code_table::code_table;
 use embedded_can::{Frame, Id, StandardId};
 
-/// Command IDs (low 5 bits of the arbitration ID), firmware 0.6.x.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum CmdId {
-    /// `0x00`.
-    GetVersion = 0x00,
-    /// `0x01`.
-    Heartbeat = 0x01,
-    /// `0x02`.
-    Estop = 0x02,
-    /// `0x03`.
-    GetError = 0x03,
-    /// `0x04`.
-    RxSdo = 0x04,
-    /// `0x05`.
-    TxSdo = 0x05,
-    /// `0x06`.
-    Address = 0x06,
-    /// `0x07`.
-    SetAxisState = 0x07,
-    /// `0x09`.
-    GetEncoderEstimates = 0x09,
-    /// `0x0B`.
-    SetControllerMode = 0x0B,
-    /// `0x0C`.
-    SetInputPos = 0x0C,
-    /// `0x0D`.
-    SetInputVel = 0x0D,
-    /// `0x0E`.
-    SetInputTorque = 0x0E,
-    /// `0x0F`.
-    SetLimits = 0x0F,
-    /// `0x11`.
-    SetTrajVelLimit = 0x11,
-    /// `0x12`.
-    SetTrajAccelLimits = 0x12,
-    /// `0x13`.
-    SetTrajInertia = 0x13,
-    /// `0x14`.
-    GetIq = 0x14,
-    /// `0x15`.
-    GetTemperature = 0x15,
-    /// `0x16`.
-    Reboot = 0x16,
-    /// `0x17`.
-    GetBusVoltageCurrent = 0x17,
-    /// `0x18`.
-    ClearErrors = 0x18,
-    /// `0x19`.
-    SetAbsolutePosition = 0x19,
-    /// `0x1A`.
-    SetPosGain = 0x1A,
-    /// `0x1B`.
-    SetVelGains = 0x1B,
-    /// `0x1C`.
-    GetTorques = 0x1C,
-    /// `0x1D`.
-    GetPowers = 0x1D,
-    /// `0x1F`.
-    EnterDfuMode = 0x1F,
-}
-
-impl CmdId {
-    /// The command for a 5-bit code, if 0.6.x defines one.
-    pub fn from_code(c: u8) -> Option<Self> {
-        use CmdId::*;
-        Some(match c {
-            0x00 => GetVersion,
-            0x01 => Heartbeat,
-            0x02 => Estop,
-            0x03 => GetError,
-            0x04 => RxSdo,
-            0x05 => TxSdo,
-            0x06 => Address,
-            0x07 => SetAxisState,
-            0x09 => GetEncoderEstimates,
-            0x0B => SetControllerMode,
-            0x0C => SetInputPos,
-            0x0D => SetInputVel,
-            0x0E => SetInputTorque,
-            0x0F => SetLimits,
-            0x11 => SetTrajVelLimit,
-            0x12 => SetTrajAccelLimits,
-            0x13 => SetTrajInertia,
-            0x14 => GetIq,
-            0x15 => GetTemperature,
-            0x16 => Reboot,
-            0x17 => GetBusVoltageCurrent,
-            0x18 => ClearErrors,
-            0x19 => SetAbsolutePosition,
-            0x1A => SetPosGain,
-            0x1B => SetVelGains,
-            0x1C => GetTorques,
-            0x1D => GetPowers,
-            0x1F => EnterDfuMode,
-            _ => return None,
-        })
+code_table! {
+    /// Command IDs (low 5 bits of the arbitration ID), firmware 0.6.x.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum CmdId {
+        /// `0x00`.
+        GetVersion = 0x00,
+        /// `0x01`.
+        Heartbeat = 0x01,
+        /// `0x02`.
+        Estop = 0x02,
+        /// `0x03`.
+        GetError = 0x03,
+        /// `0x04`.
+        RxSdo = 0x04,
+        /// `0x05`.
+        TxSdo = 0x05,
+        /// `0x06`.
+        Address = 0x06,
+        /// `0x07`.
+        SetAxisState = 0x07,
+        /// `0x09`.
+        GetEncoderEstimates = 0x09,
+        /// `0x0B`.
+        SetControllerMode = 0x0B,
+        /// `0x0C`.
+        SetInputPos = 0x0C,
+        /// `0x0D`.
+        SetInputVel = 0x0D,
+        /// `0x0E`.
+        SetInputTorque = 0x0E,
+        /// `0x0F`.
+        SetLimits = 0x0F,
+        /// `0x11`.
+        SetTrajVelLimit = 0x11,
+        /// `0x12`.
+        SetTrajAccelLimits = 0x12,
+        /// `0x13`.
+        SetTrajInertia = 0x13,
+        /// `0x14`.
+        GetIq = 0x14,
+        /// `0x15`.
+        GetTemperature = 0x15,
+        /// `0x16`.
+        Reboot = 0x16,
+        /// `0x17`.
+        GetBusVoltageCurrent = 0x17,
+        /// `0x18`.
+        ClearErrors = 0x18,
+        /// `0x19`.
+        SetAbsolutePosition = 0x19,
+        /// `0x1A`.
+        SetPosGain = 0x1A,
+        /// `0x1B`.
+        SetVelGains = 0x1B,
+        /// `0x1C`.
+        GetTorques = 0x1C,
+        /// `0x1D`.
+        GetPowers = 0x1D,
+        /// `0x1F`.
+        EnterDfuMode = 0x1F,
     }
 }
 

@@ -98,8 +98,8 @@ pub fn fast_reply_len(lens: impl IntoIterator<Item = usize>) -> usize {
     8 + lens.into_iter().map(|l| 4 + l).sum::<usize>()
 }
 
-/// Whether a FAST read of `lens` gets its combined reply: at most [`MAX_PACKET`] bytes (before
-/// stuffing, which [`MAX_RECEIVED`] leaves room for). Otherwise the stage reads with SYNC /
+/// Whether a FAST read of `lens` gets its combined reply: at most `MAX_PACKET` bytes (before
+/// stuffing, which `MAX_RECEIVED` leaves room for). Otherwise the stage reads with SYNC /
 /// BULK READ, one status packet per servo.
 pub fn fast_read_fits(lens: impl IntoIterator<Item = usize>) -> bool {
     fast_reply_len(lens) <= MAX_PACKET

@@ -246,7 +246,7 @@ pub fn main_with_args(
         controller: ctx.controller,
         faults: r.faults.0,
         rt: !r.no_rt,
-        board: (!r.no_board).then(|| BoardOptions {
+        board: (!r.no_board).then_some(BoardOptions {
             controller: ctx.board_controller,
             gateway: ctx.gateway,
             corrupt: r.board_corrupt,

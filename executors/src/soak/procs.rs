@@ -14,7 +14,7 @@ pub fn usage(pid: u32) -> Option<(u64, u64)> {
 }
 
 /// Entries of the domain: its files in /dev/shm (iceoryx2's segments, prefixed `cdr_<domain>_`)
-/// and under its root directory (/tmp/conductor/<domain>/, node and service records).
+/// and under its root directory (`/tmp/conductor/<domain>/`, node and service records).
 pub fn shm_entries(prefix: &str, root: &str) -> Vec<String> {
     let mut names: Vec<String> = std::fs::read_dir("/dev/shm")
         .map(|d| {

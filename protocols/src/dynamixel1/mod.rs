@@ -13,6 +13,7 @@ mod encode;
 mod packet;
 mod scanner;
 
+use crate::code_table::code_table;
 pub use crate::dynamixel_common::EncodeError;
 pub use encode::{
     action, bulk_read, ping, read, reg_write, reset, status, sync_write, write, BulkReadEntry,
@@ -29,26 +30,27 @@ pub const MAX_DEVICE_ID: u8 = 0xFD;
 /// Largest packet: LEN is one byte.
 pub const MAX_PACKET: usize = 4 + 255;
 
-/// Instruction codes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Instruction {
-    /// 0x01.
-    Ping = 0x01,
-    /// 0x02: read (addr, len).
-    Read = 0x02,
-    /// 0x03: write (addr, data…).
-    Write = 0x03,
-    /// 0x04: staged write.
-    RegWrite = 0x04,
-    /// 0x05: run staged writes.
-    Action = 0x05,
-    /// 0x06: factory reset.
-    Reset = 0x06,
-    /// 0x83: same address/length on many IDs, no reply.
-    SyncWrite = 0x83,
-    /// 0x92: bulk read (MX only).
-    BulkRead = 0x92,
+code_table! {
+    /// Instruction codes.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Instruction {
+        /// 0x01.
+        Ping = 0x01,
+        /// 0x02: read (addr, len).
+        Read = 0x02,
+        /// 0x03: write (addr, data…).
+        Write = 0x03,
+        /// 0x04: staged write.
+        RegWrite = 0x04,
+        /// 0x05: run staged writes.
+        Action = 0x05,
+        /// 0x06: factory reset.
+        Reset = 0x06,
+        /// 0x83: same address/length on many IDs, no reply.
+        SyncWrite = 0x83,
+        /// 0x92: bulk read (MX only).
+        BulkRead = 0x92,
+    }
 }
 
 /// The 1.0 checksum over ID, LEN, INST/ERR and parameters (the bytes after the header).

@@ -24,6 +24,7 @@ mod request;
 mod scanner;
 pub mod stuffing;
 
+use crate::code_table::code_table;
 pub use crate::dynamixel_common::EncodeError;
 pub use encode::{
     action, bulk_read, bulk_write, clear_multi_turn, control_table_backup, factory_reset,
@@ -67,66 +68,41 @@ pub const fn fast_reply_len(devices: usize, data: usize) -> usize {
     OVERHEAD + devices * (4 + data) - 2
 }
 
-/// Instruction codes (protocol2.md, newest).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum Instruction {
-    /// 0x01: answered with model number and firmware version.
-    Ping = 0x01,
-    /// 0x02: read `len` bytes from `addr`.
-    Read = 0x02,
-    /// 0x03: write bytes at `addr`.
-    Write = 0x03,
-    /// 0x04: stage a write, applied by [`Instruction::Action`].
-    RegWrite = 0x04,
-    /// 0x05: run the staged writes.
-    Action = 0x05,
-    /// 0x06: restore factory settings.
-    FactoryReset = 0x06,
-    /// 0x08: reboot.
-    Reboot = 0x08,
-    /// 0x10: clear the multi-turn revolution count.
-    Clear = 0x10,
-    /// 0x20: store or restore the control table backup.
-    ControlTableBackup = 0x20,
-    /// 0x55: a status packet (servo → host).
-    Status = 0x55,
-    /// 0x82: one status packet per listed ID.
-    SyncRead = 0x82,
-    /// 0x83: same address and length on many IDs, no reply.
-    SyncWrite = 0x83,
-    /// 0x8A: like Sync Read, but one combined reply.
-    FastSyncRead = 0x8A,
-    /// 0x92: per-ID address and length, one status packet per ID.
-    BulkRead = 0x92,
-    /// 0x93: per-ID address, length and data, no reply.
-    BulkWrite = 0x93,
-    /// 0x9A: like Bulk Read, but one combined reply.
-    FastBulkRead = 0x9A,
-}
-
-impl Instruction {
-    /// The instruction for a code byte, if it is one.
-    pub fn from_code(code: u8) -> Option<Self> {
-        use Instruction::*;
-        Some(match code {
-            0x01 => Ping,
-            0x02 => Read,
-            0x03 => Write,
-            0x04 => RegWrite,
-            0x05 => Action,
-            0x06 => FactoryReset,
-            0x08 => Reboot,
-            0x10 => Clear,
-            0x20 => ControlTableBackup,
-            0x55 => Status,
-            0x82 => SyncRead,
-            0x83 => SyncWrite,
-            0x8A => FastSyncRead,
-            0x92 => BulkRead,
-            0x93 => BulkWrite,
-            0x9A => FastBulkRead,
-            _ => return None,
-        })
+code_table! {
+    /// Instruction codes (protocol2.md, newest).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum Instruction {
+        /// 0x01: answered with model number and firmware version.
+        Ping = 0x01,
+        /// 0x02: read `len` bytes from `addr`.
+        Read = 0x02,
+        /// 0x03: write bytes at `addr`.
+        Write = 0x03,
+        /// 0x04: stage a write, applied by [`Instruction::Action`].
+        RegWrite = 0x04,
+        /// 0x05: run the staged writes.
+        Action = 0x05,
+        /// 0x06: restore factory settings.
+        FactoryReset = 0x06,
+        /// 0x08: reboot.
+        Reboot = 0x08,
+        /// 0x10: clear the multi-turn revolution count.
+        Clear = 0x10,
+        /// 0x20: store or restore the control table backup.
+        ControlTableBackup = 0x20,
+        /// 0x55: a status packet (servo → host).
+        Status = 0x55,
+        /// 0x82: one status packet per listed ID.
+        SyncRead = 0x82,
+        /// 0x83: same address and length on many IDs, no reply.
+        SyncWrite = 0x83,
+        /// 0x8A: like Sync Read, but one combined reply.
+        FastSyncRead = 0x8A,
+        /// 0x92: per-ID address and length, one status packet per ID.
+        BulkRead = 0x92,
+        /// 0x93: per-ID address, length and data, no reply.
+        BulkWrite = 0x93,
+        /// 0x9A: like Bulk Read, but one combined reply.
+        FastBulkRead = 0x9A,
     }
 }

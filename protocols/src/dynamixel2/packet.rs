@@ -2,6 +2,7 @@
 
 use super::stuffing::unstuff_in_place;
 use super::{crc, Instruction, BROADCAST_ID, HEADER, MAX_DEVICE_ID};
+use crate::code_table::code_table;
 use crate::dynamixel_common::addressable;
 
 /// A CRC-checked packet with stuffing removed.
@@ -127,33 +128,35 @@ pub(crate) fn decode_checked(frame: &mut [u8]) -> Packet<'_> {
     }
 }
 
-/// Device errors carried in bits 0–6 of the status error byte.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-pub enum DeviceError {
-    /// 0x01: the instruction could not be processed.
-    #[error("result fail")]
-    ResultFail,
-    /// 0x02: undefined instruction, or Action without Reg Write.
-    #[error("instruction error")]
-    Instruction,
-    /// 0x03: the device saw a CRC mismatch.
-    #[error("CRC error")]
-    Crc,
-    /// 0x04: value outside the address's range.
-    #[error("data range error")]
-    DataRange,
-    /// 0x05: data shorter than the item.
-    #[error("data length error")]
-    DataLength,
-    /// 0x06: value outside the configured limit.
-    #[error("data limit error")]
-    DataLimit,
-    /// 0x07: read-only/write-only/undefined address, or EEPROM write with torque on.
-    #[error("access error")]
-    Access,
+code_table! {
+    /// Device errors carried in bits 0–6 of the status error byte.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+    pub enum DeviceError {
+        /// 0x01: the instruction could not be processed.
+        #[error("result fail")]
+        ResultFail = 1,
+        /// 0x02: undefined instruction, or Action without Reg Write.
+        #[error("instruction error")]
+        Instruction = 2,
+        /// 0x03: the device saw a CRC mismatch.
+        #[error("CRC error")]
+        Crc = 3,
+        /// 0x04: value outside the address's range.
+        #[error("data range error")]
+        DataRange = 4,
+        /// 0x05: data shorter than the item.
+        #[error("data length error")]
+        DataLength = 5,
+        /// 0x06: value outside the configured limit.
+        #[error("data limit error")]
+        DataLimit = 6,
+        /// 0x07: read-only/write-only/undefined address, or EEPROM write with torque on.
+        #[error("access error")]
+        Access = 7,
+    }
     /// A code the protocol does not define.
     #[error("unknown error number {0:#04x}")]
-    Unknown(u8),
+    other Unknown(u8);
 }
 
 /// The status packet's error byte: bit 7 = hardware alert, bits 0–6 = error number.
@@ -168,17 +171,10 @@ impl ErrorByte {
 
     /// The error number, if any.
     pub fn error(self) -> Option<DeviceError> {
-        Some(match self.0 & 0x7F {
-            0 => return None,
-            1 => DeviceError::ResultFail,
-            2 => DeviceError::Instruction,
-            3 => DeviceError::Crc,
-            4 => DeviceError::DataRange,
-            5 => DeviceError::DataLength,
-            6 => DeviceError::DataLimit,
-            7 => DeviceError::Access,
-            n => DeviceError::Unknown(n),
-        })
+        match self.0 & 0x7F {
+            0 => None,
+            n => Some(DeviceError::from(n)),
+        }
     }
 
     /// No alert and no error.

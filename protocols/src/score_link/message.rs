@@ -4,6 +4,7 @@
 use super::frame::{encode_frame, FrameError};
 use super::wire::Reader;
 use super::{MAX_MESSAGE, MAX_TEXT, VERSION};
+use crate::code_table::code_table;
 use crate::writer::Writer;
 
 /// Most samples in one [`Reply::Samples`] message (9 bytes each after a 16-byte head).
@@ -94,40 +95,22 @@ pub enum Request<'a> {
     Time,
 }
 
-/// Why the board refused a request.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(u8)]
-pub enum ErrorCode {
-    /// The request could not be decoded.
-    BadRequest = 1,
-    /// No variable in that slot.
-    UnknownVariable = 2,
-    /// The variable cannot be written.
-    NotWritable = 3,
-    /// The engine refused (the text says why).
-    Refused = 4,
-    /// No free subscription slot.
-    TooManySubscriptions = 5,
-    /// The table changed since the host listed it: list again.
-    Stale = 6,
-}
-
-impl ErrorCode {
-    fn from_u8(v: u8) -> Result<Self, MessageError> {
-        Ok(match v {
-            1 => Self::BadRequest,
-            2 => Self::UnknownVariable,
-            3 => Self::NotWritable,
-            4 => Self::Refused,
-            5 => Self::TooManySubscriptions,
-            6 => Self::Stale,
-            _ => {
-                return Err(MessageError::BadField {
-                    field: "error code",
-                    value: v as u32,
-                })
-            }
-        })
+code_table! {
+    /// Why the board refused a request.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub enum ErrorCode {
+        /// The request could not be decoded.
+        BadRequest = 1,
+        /// No variable in that slot.
+        UnknownVariable = 2,
+        /// The variable cannot be written.
+        NotWritable = 3,
+        /// The engine refused (the text says why).
+        Refused = 4,
+        /// No free subscription slot.
+        TooManySubscriptions = 5,
+        /// The table changed since the host listed it: list again.
+        Stale = 6,
     }
 }
 
@@ -561,7 +544,13 @@ pub fn decode_reply(msg: &[u8]) -> Result<(u16, Reply<'_>), MessageError> {
         },
         kind::R_TIME => Reply::Time { t_us: r.u64()? },
         kind::R_ERROR => Reply::Error {
-            code: ErrorCode::from_u8(r.u8()?)?,
+            code: {
+                let v = r.u8()?;
+                ErrorCode::from_code(v).ok_or(MessageError::BadField {
+                    field: "error code",
+                    value: v as u32,
+                })?
+            },
             text: r.str(MAX_TEXT)?,
         },
         kind::E_SAMPLES => {

@@ -15,6 +15,21 @@ _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
 RESERVED_STATE_NAMES = ("commands", "tick", "stats", "surface")
 
 
+def receive_copy(port, kind, what: str):
+    """The next queued sample of subscriber ``port`` copied out as a ``kind`` (a ctypes
+    structure of the ABI), its shared-memory slot handed back at once; ``None`` when the queue
+    is empty. iceoryx2's failures are raised as ``BusError`` naming ``what``."""
+    try:
+        sample = port.receive()
+    except Exception as e:
+        raise BusError(f"receiving {what}: {e!r}") from e
+    if sample is None:
+        return None
+    value = kind.from_buffer_copy(sample.payload().contents)
+    del sample
+    return value
+
+
 def default_domain() -> str:
     """``$CONDUCTOR_DOMAIN``, else ``default``."""
     return os.environ.get("CONDUCTOR_DOMAIN") or "default"

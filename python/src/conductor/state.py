@@ -7,7 +7,7 @@ import iceoryx2 as iox2
 import numpy as np
 
 from .abi import StateSample, Status
-from .bus import Bus, connect
+from .bus import Bus, connect, receive_copy
 from .discovery import StateInfo, resolve
 from .errors import BusError, Timeout
 
@@ -84,14 +84,9 @@ class State:
         """Moves every queued sample into the ring; returns how many there were."""
         n = 0
         while True:
-            try:
-                sample = self._port.receive()
-            except Exception as e:
-                raise BusError(f"receiving {self.name!r}: {e!r}") from e
-            if sample is None:
+            s = receive_copy(self._port, StateSample, repr(self.name))
+            if s is None:
                 return n
-            s = StateSample.from_buffer_copy(sample.payload().contents)
-            del sample  # hand the shared-memory slot back at once
             if self._last is not None:
                 if s.seq > self._last.seq + 1:
                     self.missed += s.seq - self._last.seq - 1

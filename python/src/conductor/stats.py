@@ -7,7 +7,7 @@ import iceoryx2 as iox2
 import numpy as np
 
 from .abi import HISTOGRAM_BUCKETS, ExecutorStats, bucket_range
-from .bus import Bus, connect, validate_name
+from .bus import Bus, connect, receive_copy, validate_name
 from .errors import BusError, Timeout, UnknownSubsystem
 
 
@@ -36,14 +36,10 @@ class Stats:
     def latest(self) -> Optional[ExecutorStats]:
         """The newest stats received so far (drains the queue), or ``None``."""
         while True:
-            try:
-                s = self._port.receive()
-            except Exception as e:
-                raise BusError(f"receiving {self.subsystem!r} stats: {e!r}") from e
+            s = receive_copy(self._port, ExecutorStats, f"{self.subsystem!r} stats")
             if s is None:
                 return self._latest
-            self._latest = ExecutorStats.from_buffer_copy(s.payload().contents)
-            del s
+            self._latest = s
 
     def wait(self, timeout: float = 2.0, newer_than: int = -1) -> ExecutorStats:
         """Waits for stats whose ``seq`` is above ``newer_than``; raises

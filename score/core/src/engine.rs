@@ -32,7 +32,7 @@ pub(crate) struct Stream {
 /// then changes the table) and calls [`Engine::tick`] with the current time; `tick` runs every
 /// periodic variable that is due, highest rate first, producers before consumers at equal rates.
 /// Bare expressions are evaluated when something reads them. The engine owns no hardware: calls
-/// that touch it take the port's [`Hal`].
+/// that touch it take the port's [`Hal`](crate::hal::Hal).
 ///
 /// `Engine` is `Clone + PartialEq` so that a table can be snapshotted and compared.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,14 +1,9 @@
 //! The `score` binary: batch scripts, piped sessions, save/load, real time.
 mod common;
 
-use std::io::Write;
-use std::process::{Command, Stdio};
-
 use score_host::{Session, TimeMode};
 
-fn score() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_score"))
-}
+use common::score;
 
 #[test]
 fn every_thesis_script_runs_unchanged_in_batch_mode() {
@@ -43,22 +38,11 @@ fn every_thesis_script_runs_unchanged_in_batch_mode() {
 
 #[test]
 fn piped_session_prints_prompts_outputs_and_fails_on_errors() {
-    let mut child = score()
-        .args(["--simulated", "-q"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(
-            "adc A 1000\nvar\ndefexp target adca 1 \u{2212}\nrun 0.1\nprintv target\nbogus\n"
-                .as_bytes(),
-        )
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = common::piped_session(
+        &["--simulated", "-q"],
+        "adc A 1000\nvar\ndefexp target adca 1 \u{2212}\nrun 0.1\nprintv target\nbogus\n"
+            .as_bytes(),
+    );
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("-\n  adca\n  1.000000\n"), "{text}");
     assert!(text.contains("target - "), "{text}");

@@ -10,9 +10,7 @@ use std::time::Duration;
 use score_core::Real;
 use score_host::{Session, SessionError, TimeMode};
 
-fn score() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_score"))
-}
+use common::score;
 
 #[test]
 fn run_never_moves_the_simulated_clock_past_its_end_or_backwards() {
@@ -217,19 +215,7 @@ fn errors_of_scripts_and_piped_lines_show_the_column() {
          name or an operator (+ - * / min max neg abs sqrt sin cos exp)"
     );
     // Typed or piped: a caret under the token, below the echoed line.
-    let mut child = score()
-        .args(["--simulated"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .unwrap();
-    child
-        .stdin
-        .take()
-        .unwrap()
-        .write_all(b"  adc 0 100 extra\n")
-        .unwrap();
-    let out = child.wait_with_output().unwrap();
+    let out = common::piped_session(&["--simulated"], b"  adc 0 100 extra\n");
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(
         text.contains("$> adc 0 100 extra\n             ^\nerror: adc: unexpected 'extra'"),

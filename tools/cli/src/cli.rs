@@ -228,7 +228,7 @@ pub struct BridgeArgs {
     /// A bridge.toml (see deploy/bridge.md).
     #[arg(long, value_name = "FILE", conflicts_with = "manifest")]
     pub config: Option<PathBuf>,
-    /// A robot manifest: its [bridge] table (what `conductor launch` uses).
+    /// A robot manifest: its `[bridge]` table (what `conductor launch` uses).
     #[arg(long, value_name = "FILE")]
     pub manifest: Option<PathBuf>,
     /// This bridge's host name on Zenoh [default: the machine's host name].
@@ -371,22 +371,6 @@ pub struct RecordArgs {
     /// Never draw a progress bar (it is drawn only when stderr is a terminal anyway).
     #[arg(long)]
     pub no_progress: bool,
-    /// Only the bridge benchmark: latency through `conductor bridge` vs raw Zenoh vs the local
-    /// bus, and a load run (CPU % of each bridge, drops); over two network namespaces as root.
-    #[arg(long)]
-    pub bridge: bool,
-    /// States of the bridge load run.
-    #[arg(long, default_value_t = 1000, value_name = "N")]
-    pub bridge_states: usize,
-    /// Rate of the bridge load run (Hz).
-    #[arg(long, default_value_t = 1000.0, value_name = "HZ")]
-    pub bridge_rate: f64,
-    /// Samples per latency path of the bridge benchmark [default: 5000; --quick: 1000].
-    #[arg(long, value_name = "N")]
-    pub bridge_samples: Option<usize>,
-    /// Run the bridge benchmark over loopback even as root.
-    #[arg(long)]
-    pub bridge_loopback: bool,
 }
 
 /// `conductor replay`.

@@ -1,7 +1,7 @@
 //! # conductor-cli
 //!
 //! The `conductor` command line. Each subcommand is a module with a `run` function taking the
-//! parsed arguments (see [`cli`]) and a [`Bus`](conductor_bus::Bus) on the chosen domain:
+//! parsed arguments (see [`cli`]) and a [`Bus`] on the chosen domain:
 //!
 //! * inspection: [`list`], [`get_set`] (`get`, `set`), [`echo`] (with [`live_plot`] for
 //!   `--plot`), [`top`];
@@ -9,11 +9,9 @@
 //! * the thesis' external interface: [`udp`] (`udp-gateway`);
 //! * the live view in Foxglove: [`view`] (over `conductor-view`);
 //! * other hosts: [`bridge`] (`bridge`, over `conductor_bridge`);
-//! * the benchmark suite: [`bench`] (`bench`, over `conductor_benches::suite`).
+//! * the benchmark suite: [`bench`](mod@bench) (`bench`, over `conductor_benches::suite`).
 //!
-//! Long-running commands stop cleanly on Ctrl-C/SIGTERM ([`stop`]).
-
-#![warn(missing_docs)]
+//! Long-running commands stop cleanly on Ctrl-C/SIGTERM (`conductor_bus::shutdown`).
 
 pub mod bench;
 pub mod bench_bridge;
@@ -66,6 +64,11 @@ pub fn run(cli: Cli) -> Result<()> {
         let d = domain(cli.domain.as_deref())?;
         Ok(Bus::open(&d, &format!("conductor-cli/{what}"))?)
     };
+    // Commands that run until Ctrl-C: the stop handler first, then the bus.
+    let until_stopped = |what: &str| -> Result<Bus> {
+        install_stop()?;
+        bus(what)
+    };
     match &cli.command {
         Command::Launch(_)
         | Command::Executor { .. }
@@ -83,30 +86,12 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::List(a) => list::run(&bus("list")?, a).map(drop),
         Command::Get(a) => get_set::get(&bus("get")?, a).map(drop),
         Command::Set(a) => get_set::set(&bus("set")?, a),
-        Command::Echo(a) => {
-            install_stop()?;
-            echo::run(&bus("echo")?, a).map(drop)
-        }
-        Command::Top(a) => {
-            install_stop()?;
-            top::run(&bus("top")?, a).map(drop)
-        }
-        Command::Record(a) => {
-            install_stop()?;
-            record::run(&bus("record")?, a).map(drop)
-        }
-        Command::Replay(a) => {
-            install_stop()?;
-            replay::run(&bus("replay")?, a).map(drop)
-        }
-        Command::UdpGateway(a) => {
-            install_stop()?;
-            udp::run(&bus("udp-gateway")?, a).map(drop)
-        }
-        Command::View(a) => {
-            install_stop()?;
-            view::run(&bus("view")?, a).map(drop)
-        }
+        Command::Echo(a) => echo::run(&until_stopped("echo")?, a).map(drop),
+        Command::Top(a) => top::run(&until_stopped("top")?, a).map(drop),
+        Command::Record(a) => record::run(&until_stopped("record")?, a).map(drop),
+        Command::Replay(a) => replay::run(&until_stopped("replay")?, a).map(drop),
+        Command::UdpGateway(a) => udp::run(&until_stopped("udp-gateway")?, a).map(drop),
+        Command::View(a) => view::run(&until_stopped("view")?, a).map(drop),
         Command::Bridge(a) => {
             install_stop()?;
             bridge::run(cli.domain.as_deref(), a)

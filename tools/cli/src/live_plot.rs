@@ -15,6 +15,7 @@ use textplots::{Chart, ColorPlot, LabelBuilder, LabelFormat, Plot, Shape};
 use crate::cli::EchoArgs;
 use crate::error::{CliError, Result};
 use crate::out;
+use crate::plot::PALETTE;
 
 /// One plotted state.
 pub struct Plotted {
@@ -39,20 +40,6 @@ impl Plotted {
         }
     }
 }
-
-/// Line colours (the "tab10" set, as in `conductor plot`).
-const COLOURS: [(u8, u8, u8); 10] = [
-    (31, 119, 180),
-    (255, 127, 14),
-    (44, 160, 44),
-    (214, 39, 40),
-    (148, 103, 189),
-    (140, 86, 75),
-    (227, 119, 194),
-    (127, 127, 127),
-    (188, 189, 34),
-    (23, 190, 207),
-];
 
 /// Columns and rows of the terminal on stdout, if it is one.
 fn terminal_size() -> Option<(u16, u16)> {
@@ -106,7 +93,7 @@ pub fn frame(
     let mut c = chart.y_label_format(LabelFormat::Custom(Box::new(|v| format!("{v:.3}"))));
     for (i, s) in shapes.iter().enumerate() {
         c = if colour {
-            let (r, g, b) = COLOURS[i % COLOURS.len()];
+            let (r, g, b) = PALETTE[i % PALETTE.len()];
             c.linecolorplot(s, textplots_rgb(r, g, b))
         } else {
             c.lineplot(s)
@@ -121,7 +108,7 @@ pub fn frame(
     );
     for (i, s) in states.iter().enumerate() {
         let mark = if colour {
-            let (r, g, b) = COLOURS[i % COLOURS.len()];
+            let (r, g, b) = PALETTE[i % PALETTE.len()];
             format!("\x1b[38;2;{r};{g};{b}m━━\x1b[0m")
         } else {
             format!("[{}]", i + 1)

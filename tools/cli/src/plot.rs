@@ -146,8 +146,9 @@ pub fn series(rec: &Recording, patterns: &[String], path: &Path) -> Result<Vec<S
     Ok(out)
 }
 
-/// Distinct colours that read well on white (the "tab10" set of many plotting tools).
-const PALETTE: [(u8, u8, u8); 10] = [
+/// Distinct colours that read well on white (the "tab10" set of many plotting tools); also
+/// the line colours of `conductor echo --plot`.
+pub(crate) const PALETTE: [(u8, u8, u8); 10] = [
     (31, 119, 180),
     (255, 127, 14),
     (44, 160, 44),

@@ -26,7 +26,11 @@ pub fn run(args: &[OsString]) -> ExitCode {
                 "soak".into(),
                 "score-controller".into(),
             ],
-            gateway: vec![me.display().to_string(), "soak".into(), "score-gateway".into()],
+            gateway: vec![
+                me.display().to_string(),
+                "soak".into(),
+                "score-gateway".into(),
+            ],
             executor: me,
             executor_args: vec!["__executor".into()],
         },

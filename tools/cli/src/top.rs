@@ -22,6 +22,15 @@ struct Column {
     cell: fn(&ExecutorStats, u64) -> String,
 }
 
+/// A [`Column`] on one line of [`COLUMNS`].
+const fn col(
+    narrow: Option<&'static str>,
+    wide: &'static str,
+    cell: fn(&ExecutorStats, u64) -> String,
+) -> Column {
+    Column { narrow, wide, cell }
+}
+
 /// `done/total`, or `-` when there is no total.
 fn of(n: u32, total: u32) -> String {
     if total == 0 {
@@ -34,120 +43,48 @@ fn of(n: u32, total: u32) -> String {
 /// Every column after SUBSYSTEM, in table order. The narrow table (the default) keeps what tells
 /// whether a subsystem is healthy and fits about 100 columns; `--wide` has every figure.
 const COLUMNS: [Column; 22] = [
-    Column {
-        narrow: Some("HZ"),
-        wide: "RATE_HZ",
-        cell: |s, _| format!("{:.1}", s.achieved_rate_hz),
-    },
-    Column {
-        narrow: None,
-        wide: "TARGET_HZ",
-        cell: |s, _| format!("{:.1}", s.base_rate_hz),
-    },
-    Column {
-        narrow: None,
-        wide: "LATE_P50_US",
-        cell: |s, _| us(s.lateness_p50_ns),
-    },
-    Column {
-        narrow: Some("P99_US"),
-        wide: "LATE_P99_US",
-        cell: |s, _| us(s.lateness_p99_ns),
-    },
-    Column {
-        narrow: None,
-        wide: "LATE_MAX_US",
-        cell: |s, _| us(s.lateness_max_ns),
-    },
-    Column {
-        narrow: Some("MISS"),
-        wide: "MISSES",
-        cell: |s, _| s.misses.to_string(),
-    },
-    Column {
-        narrow: Some("STALE"),
-        wide: "STALE",
-        cell: |s, _| format!("{}/{}", s.stale_states, s.states),
-    },
-    Column {
-        narrow: Some("DEV"),
-        wide: "ENABLED",
-        cell: |s, _| of(s.devices_enabled, s.devices),
-    },
-    Column {
-        narrow: Some("TRIP"),
-        wide: "TRIPPED",
-        cell: |s, _| s.devices_tripped.to_string(),
-    },
-    Column {
-        narrow: Some("FAULT"),
-        wide: "FAULTED",
-        cell: |s, _| s.devices_faulted.to_string(),
-    },
-    Column {
-        narrow: None,
-        wide: "LINKS_DOWN",
-        cell: |s, _| s.links_down.to_string(),
-    },
-    Column {
-        narrow: Some("BUS_ERR"),
-        wide: "BUS_ERR",
-        cell: |s, _| s.bus_errors.to_string(),
-    },
-    Column {
-        narrow: Some("OUTAGE"),
-        wide: "OUTAGES",
-        cell: |s, _| s.bus_outages.to_string(),
-    },
-    Column {
-        narrow: Some("LATE"),
-        wide: "LATE_REPLIES",
-        cell: |s, _| s.late_replies.to_string(),
-    },
-    Column {
-        narrow: None,
-        wide: "FRAMES",
-        cell: |s, _| s.frames_applied.to_string(),
-    },
-    Column {
-        narrow: None,
-        wide: "REJECTED",
-        cell: |s, _| s.setpoints_rejected.to_string(),
-    },
-    Column {
-        narrow: Some("REFUSED"),
-        wide: "REFUSED",
-        cell: |s, _| s.setpoints_refused.to_string(),
-    },
-    Column {
-        narrow: None,
-        wide: "CLAMPED",
-        cell: |s, _| s.setpoints_clamped.to_string(),
-    },
-    Column {
-        narrow: None,
-        wide: "WATCHDOG",
-        cell: |s, _| s.watchdog_trips.to_string(),
-    },
-    Column {
-        narrow: None,
-        wide: "FAULTS",
-        cell: |s, _| s.device_faults.to_string(),
-    },
-    Column {
-        narrow: None,
-        wide: "RT",
-        cell: |s, _| match (s.rt_active, s.cpu) {
-            (0, _) => "no".into(),
-            (_, c) if c < 0 => "fifo".into(),
-            (_, c) => format!("fifo@{c}"),
-        },
-    },
-    Column {
-        narrow: Some("AGE"),
-        wide: "AGE",
-        cell: |s, now| out::age(now.saturating_sub(s.t_ns) as f64 * 1e-9).replace(' ', ""),
-    },
+    col(Some("HZ"), "RATE_HZ", |s, _| {
+        format!("{:.1}", s.achieved_rate_hz)
+    }),
+    col(None, "TARGET_HZ", |s, _| format!("{:.1}", s.base_rate_hz)),
+    col(None, "LATE_P50_US", |s, _| us(s.lateness_p50_ns)),
+    col(Some("P99_US"), "LATE_P99_US", |s, _| us(s.lateness_p99_ns)),
+    col(None, "LATE_MAX_US", |s, _| us(s.lateness_max_ns)),
+    col(Some("MISS"), "MISSES", |s, _| s.misses.to_string()),
+    col(Some("STALE"), "STALE", |s, _| {
+        format!("{}/{}", s.stale_states, s.states)
+    }),
+    col(Some("DEV"), "ENABLED", |s, _| {
+        of(s.devices_enabled, s.devices)
+    }),
+    col(Some("TRIP"), "TRIPPED", |s, _| {
+        s.devices_tripped.to_string()
+    }),
+    col(Some("FAULT"), "FAULTED", |s, _| {
+        s.devices_faulted.to_string()
+    }),
+    col(None, "LINKS_DOWN", |s, _| s.links_down.to_string()),
+    col(Some("BUS_ERR"), "BUS_ERR", |s, _| s.bus_errors.to_string()),
+    col(Some("OUTAGE"), "OUTAGES", |s, _| s.bus_outages.to_string()),
+    col(Some("LATE"), "LATE_REPLIES", |s, _| {
+        s.late_replies.to_string()
+    }),
+    col(None, "FRAMES", |s, _| s.frames_applied.to_string()),
+    col(None, "REJECTED", |s, _| s.setpoints_rejected.to_string()),
+    col(Some("REFUSED"), "REFUSED", |s, _| {
+        s.setpoints_refused.to_string()
+    }),
+    col(None, "CLAMPED", |s, _| s.setpoints_clamped.to_string()),
+    col(None, "WATCHDOG", |s, _| s.watchdog_trips.to_string()),
+    col(None, "FAULTS", |s, _| s.device_faults.to_string()),
+    col(None, "RT", |s, _| match (s.rt_active, s.cpu) {
+        (0, _) => "no".into(),
+        (_, c) if c < 0 => "fifo".into(),
+        (_, c) => format!("fifo@{c}"),
+    }),
+    col(Some("AGE"), "AGE", |s, now| {
+        out::age(now.saturating_sub(s.t_ns) as f64 * 1e-9).replace(' ', "")
+    }),
 ];
 
 fn columns(wide: bool) -> impl Iterator<Item = &'static Column> {

@@ -15,7 +15,7 @@ mod support;
 
 use std::os::fd::{FromRawFd, OwnedFd};
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use conductor_bus::{Bus, Domain, StateSubscriber};
 use conductor_executor::launcher::{ExecutorInfo, Launch, LaunchOptions, ProcessKind};
@@ -72,15 +72,8 @@ fn info(launch: &Launch, name: &str) -> ExecutorInfo {
 }
 
 /// Polls `f` until it returns Some, or panics after [`WAIT`].
-fn eventually<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
-    let end = Instant::now() + WAIT;
-    loop {
-        if let Some(v) = f() {
-            return v;
-        }
-        assert!(Instant::now() < end, "{what}: not within {WAIT:?}");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+fn eventually<T>(what: &str, f: impl FnMut() -> Option<T>) -> T {
+    conductor_testkit::eventually(WAIT, what, f)
 }
 
 /// A subscriber to `name`, once its service exists.

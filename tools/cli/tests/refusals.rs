@@ -15,52 +15,6 @@ use std::time::{Duration, Instant};
 use conductor_bus::{Bus, Controller, Domain};
 use support::*;
 
-const MANIFEST: &str = r#"
-system = "refusals"
-
-[subsystems.leg]
-rate_hz = 200
-watchdog_ms = 100     # no command frame for 0.1 s: the motor leaves motor mode (tripped)
-
-[subsystems.leg.hardware.can]
-kind = "can_sim"
-mit = "1"
-
-[subsystems.leg.protocols.mit]
-kind = "can_motors"
-hardware = "can"
-
-[subsystems.leg.devices.knee]
-kind = "mit_motor"
-protocol = "mit"
-id = 1
-kp = 20.0
-kd = 1.0
-safe_action = "torque_off"
-
-[subsystems.leg.states.knee]
-device = "knee"
-channel = "position"
-units = "rad"
-writable = true
-min = -1.0
-max = 1.0
-
-[subsystems.leg.states.knee_kp]
-device = "knee"
-channel = "kp"
-writable = true
-min = 0.0
-max = 50.0
-
-[subsystems.leg.states.knee_enable]
-device = "knee"
-channel = "enable"
-writable = true
-min = 0
-max = 1
-"#;
-
 /// The flags `conductor get` prints for `state`, or `None` while it cannot read it.
 fn flags(d: &Domain, state: &str) -> Option<String> {
     let out = conductor(d).args(["get", state]).output().ok()?;
@@ -104,7 +58,7 @@ fn text(b: &[u8]) -> String {
 fn set_fails_when_the_executor_refuses_and_says_how_to_enable() {
     let dir = tempdir("refusals");
     let manifest = dir.join("leg.toml");
-    std::fs::write(&manifest, MANIFEST).unwrap();
+    std::fs::write(&manifest, TRIPPING_LEG).unwrap();
     let d = Domain::unique("refusals").unwrap();
     let launcher = Bg::spawn(
         conductor(&d)

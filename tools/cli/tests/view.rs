@@ -575,48 +575,6 @@ fn a_manifest_view_is_launched_and_restarted_by_the_launcher() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
-/// An MIT-mode motor on the simulated CAN bus with a 100 ms command watchdog (as in
-/// tests/refusals.rs): once a first frame armed it, with no controller sending frames, the
-/// watchdog trips the motor and the executor refuses its setpoints (`REJECTED`).
-const TRIPPING_LEG: &str = r#"
-system = "view-refusals"
-
-[subsystems.leg]
-rate_hz = 200
-watchdog_ms = 100
-
-[subsystems.leg.hardware.can]
-kind = "can_sim"
-mit = "1"
-
-[subsystems.leg.protocols.mit]
-kind = "can_motors"
-hardware = "can"
-
-[subsystems.leg.devices.knee]
-kind = "mit_motor"
-protocol = "mit"
-id = 1
-kp = 20.0
-kd = 1.0
-safe_action = "torque_off"
-
-[subsystems.leg.states.knee]
-device = "knee"
-channel = "position"
-units = "rad"
-writable = true
-min = -1.0
-max = 1.0
-
-[subsystems.leg.states.knee_enable]
-device = "knee"
-channel = "enable"
-writable = true
-min = 0
-max = 1
-"#;
-
 #[test]
 fn a_setpoint_the_executor_refuses_comes_back_as_an_error_with_the_flags() {
     let d = Domain::unique("view-refused").unwrap();

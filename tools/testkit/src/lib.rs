@@ -11,8 +11,10 @@
 //! * [`can_vm`] — Debian's kernel booted in QEMU with the host's file system shared, for tests
 //!   that need a real Linux CAN stack (vcan, slcan) the build machine's kernel lacks.
 //! * [`fuzz`] — the fuzz targets' seed and regression corpora replayed as an ordinary test.
+//! * [`eventually`] — polling for what another process or thread will make true.
 
 use std::path::PathBuf;
+use std::time::{Duration, Instant};
 
 pub mod alloc;
 pub mod can_vm;
@@ -38,4 +40,17 @@ pub fn python() -> PathBuf {
         py.display()
     );
     py
+}
+
+/// Polls `f` every 10 ms until it returns `Some`, and returns that; panics naming `what` once
+/// `timeout` has passed (a bound on failure, not a speed claim).
+pub fn eventually<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Option<T>) -> T {
+    let end = Instant::now() + timeout;
+    loop {
+        if let Some(v) = f() {
+            return v;
+        }
+        assert!(Instant::now() < end, "{what}: not within {timeout:?}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }

@@ -7,7 +7,8 @@
 //!   harness's npm packages (`npm ci`); for the CAN tests in a VM, QEMU, can-utils and
 //!   busybox-static (Debian), and Debian's kernel image with the modules the VM loads, extracted
 //!   into `target/can-vm/` (the package is downloaded, not installed).
-//! * `test`  — `setup`, then the Score firmware build, every test of the workspace (the firmware
+//! * `test`  — the habits (`cargo fmt --check`, clippy and `cargo doc`, warnings denied: see
+//!   [`habits`]), `setup`, then the Score firmware build, every test of the workspace (the firmware
 //!   tests boot that image in the rp2040js emulator; tools/cli's `bench` test runs
 //!   `conductor bench --quick`), the f32 build of Score, and the no_std crates built for the
 //!   RP2040's Cortex-M0+.
@@ -70,7 +71,7 @@ fn run(cmd: &mut Command) -> Result {
 fn setup() -> Result<Vec<(String, String)>> {
     let t = Instant::now();
     let python = python_venv()?;
-    rust_target(THUMB)?;
+    rustup_add("target", &[THUMB])?;
     // `ip` makes the network namespaces and veth pair of the bridge test (tools/cli/tests/bridge.rs).
     debian_tools(&[
         ("socat", "socat"),
@@ -298,18 +299,28 @@ fn npm_ci(dir: &Path) -> Result {
 /// The RP2040's target: Cortex-M0+, no FPU.
 const THUMB: &str = "thumbv6m-none-eabi";
 
-fn rust_target(target: &str) -> Result {
+/// Adds what `rustup <kind> list --installed` lacks of `wanted` (`kind`: `target` or
+/// `component`; components are listed with their host's triple, `clippy-x86_64-…`).
+fn rustup_add(kind: &str, wanted: &[&str]) -> Result {
     let installed = Command::new("rustup")
-        .args(["target", "list", "--installed"])
+        .args([kind, "list", "--installed"])
         .output()
         .map_err(|e| format!("rustup: {e}"))?;
-    if String::from_utf8_lossy(&installed.stdout)
-        .lines()
-        .any(|l| l.trim() == target)
-    {
+    let installed = String::from_utf8_lossy(&installed.stdout);
+    let missing: Vec<&str> = wanted
+        .iter()
+        .copied()
+        .filter(|w| {
+            !installed
+                .lines()
+                .map(str::trim)
+                .any(|l| l == *w || l.strip_prefix(*w).is_some_and(|rest| rest.starts_with('-')))
+        })
+        .collect();
+    if missing.is_empty() {
         return Ok(());
     }
-    run(Command::new("rustup").args(["target", "add", target]))
+    run(Command::new("rustup").args([kind, "add"]).args(&missing))
 }
 
 /// `.venv` with the pinned interop packages and the `conductor` package of `python/` (editable,
@@ -335,26 +346,20 @@ fn python_venv() -> Result<PathBuf> {
     if !python.exists() {
         run(Command::new("python3").args(["-m", "venv"]).arg(&venv))?;
     }
-    run(Command::new(&python)
-        .args([
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            "--disable-pip-version-check",
-            "-r",
-        ])
-        .arg(&reqs))?;
-    run(Command::new(&python)
-        .args([
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            "--disable-pip-version-check",
-            "-e",
-        ])
-        .arg(&package))?;
+    let pip_install = |how: &str, what: &Path| {
+        run(Command::new(&python)
+            .args([
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--disable-pip-version-check",
+            ])
+            .arg(how)
+            .arg(what))
+    };
+    pip_install("-r", &reqs)?;
+    pip_install("-e", &package)?;
     std::fs::write(&stamp, wanted).map_err(|e| e.to_string())?;
     Ok(python)
 }
@@ -373,9 +378,39 @@ fn cargo(root: &Path, env: &[(String, String)], args: &[&str]) -> Result {
     Ok(())
 }
 
+/// Formatting, lints and docs, all with warnings denied: `cargo fmt --check`, clippy on every
+/// target of the workspace (the workspace lints of `Cargo.toml` included) and `cargo doc` of
+/// the workspace's own crates. Clippy and rustdoc read the dependencies' metadata from one
+/// `check` build they share, so the pair costs about one check of the workspace.
+fn habits(root: &Path) -> Result {
+    rustup_add("component", &["rustfmt", "clippy"])?;
+    cargo(root, &[], &["fmt", "--all", "--check"])?;
+    cargo(
+        root,
+        &[],
+        &[
+            "clippy",
+            "--workspace",
+            "--all-targets",
+            "--locked",
+            "--",
+            "-D",
+            "warnings",
+        ],
+    )?;
+    cargo(
+        root,
+        &[("RUSTDOCFLAGS".into(), "-D warnings".into())],
+        &["doc", "--workspace", "--no-deps", "--locked"],
+    )
+}
+
 fn test() -> Result {
-    let env = setup()?;
     let root = root();
+    // The habits first: they need nothing installed and fail in seconds to minutes, before
+    // the setup and the long test run.
+    habits(&root)?;
+    let env = setup()?;
     // The no_std crates must build for the firmware's target: proves no_std and no heap.
     for features in [&[][..], &["--features", "score-core/f32"][..]] {
         let mut args = vec!["build", "--locked", "--target", THUMB, "-p", "score-core"];

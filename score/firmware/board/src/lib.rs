@@ -13,13 +13,12 @@
 //!   they were produced;
 //! * [`link`]: the `score_link` server: requests in, reply frames out;
 //! * [`terminal`]: the human terminal: echo, line editing, prompt, banner, commands;
-//! * [`bench`]: the Fig. 5.20 PID timed update by update against a cycle counter;
+//! * [`bench`](mod@bench): the Fig. 5.20 PID timed update by update against a cycle counter;
 //! * [`out`]: fixed-capacity output buffers (text with CR LF, concatenated frames).
 //!
 //! The firmware (`score/firmware/src`) only adds Embassy tasks, USB and the registers.
 #![no_std]
 #![forbid(unsafe_code)]
-#![warn(missing_docs)]
 
 #[cfg(test)]
 extern crate std;

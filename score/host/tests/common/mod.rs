@@ -1,10 +1,29 @@
 //! Helpers: a scratch directory holding the thesis files, running scripts, reading logs.
 #![allow(dead_code)]
 
+use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use score_host::{Session, TimeMode};
+
+/// The `score` binary of this build.
+pub fn score() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_score"))
+}
+
+/// `score args…` with `input` piped to it as a session; its stdout captured (stderr inherited).
+pub fn piped_session(args: &[&str], input: &[u8]) -> Output {
+    let mut child = score()
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child.stdin.take().unwrap().write_all(input).unwrap();
+    child.wait_with_output().unwrap()
+}
 
 pub fn thesis_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/thesis")

@@ -226,3 +226,53 @@ pub fn leg(rate: f64) -> Vec<conductor_bus::StateSpec> {
         state(2, "current", "A", false, (-5.0, 5.0), rate, ""),
     ]
 }
+
+/// A leg whose MIT-mode knee motor, on the simulated CAN bus, trips after 100 ms without a
+/// command frame (`watchdog_ms`): once a first frame armed the watchdog and no controller sends
+/// frames, the executor refuses the knee's setpoints until `knee_enable` is set again
+/// (tests/refusals.rs, tests/view.rs).
+pub const TRIPPING_LEG: &str = r#"
+system = "tripping-leg"
+
+[subsystems.leg]
+rate_hz = 200
+watchdog_ms = 100     # no command frame for 0.1 s: the motor leaves motor mode (tripped)
+
+[subsystems.leg.hardware.can]
+kind = "can_sim"
+mit = "1"
+
+[subsystems.leg.protocols.mit]
+kind = "can_motors"
+hardware = "can"
+
+[subsystems.leg.devices.knee]
+kind = "mit_motor"
+protocol = "mit"
+id = 1
+kp = 20.0
+kd = 1.0
+safe_action = "torque_off"
+
+[subsystems.leg.states.knee]
+device = "knee"
+channel = "position"
+units = "rad"
+writable = true
+min = -1.0
+max = 1.0
+
+[subsystems.leg.states.knee_kp]
+device = "knee"
+channel = "kp"
+writable = true
+min = 0.0
+max = 50.0
+
+[subsystems.leg.states.knee_enable]
+device = "knee"
+channel = "enable"
+writable = true
+min = 0
+max = 1
+"#;
