@@ -192,7 +192,8 @@ fn shipped_manifests_have_no_warnings() {
 }
 
 /// The `cubemars_ak` kind: its model is a choice (default AK80-9), its channels are the MIT
-/// motor's, and an unknown model is refused with the models it knows.
+/// motor's, an unknown model is refused with the models it knows, and a model other than the
+/// one its `can_motors` stage encodes that motor with is refused.
 #[test]
 fn a_cubemars_ak_manifest_validates() {
     let text = |model: &str| {
@@ -233,7 +234,27 @@ writable = true
     assert_eq!(knee.params.str("model").unwrap(), "ak70-10");
     let names: Vec<&str> = knee.channels.iter().map(|c| c.name).collect();
     assert_eq!(&names[..3], ["position", "velocity", "torque"]);
-    let m = Manifest::parse(&text(""), "ak.toml").unwrap();
+    // The device's default model (AK80-9) disagrees with the stage's AK70-10: the stage would
+    // encode this motor's torque with the other model's range, so it is refused where it is.
+    let e = Manifest::parse(&text(""), "ak.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("subsystems.leg.devices.knee.model")
+            && e.contains("disagrees with protocol \"mit\"")
+            && e.contains("±25 N·m")
+            && e.contains("±18 N·m"),
+        "{e}"
+    );
+    // A per-motor entry of the stage is what counts for that motor.
+    let m = Manifest::parse(
+        &text("").replace(
+            "model = \"ak70-10\"",
+            "model = \"ak70-10\"\nmodels = \"1=ak80-9\"",
+        ),
+        "ak.toml",
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(
         m.subsystems[0].devices[0].params.str("model").unwrap(),
         "ak80-9"

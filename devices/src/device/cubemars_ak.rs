@@ -25,7 +25,7 @@ use conductor_protocols::mit_can::{Limits, Model, Range};
 
 use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::device::{mit_channel, MitMotor};
-use crate::kinds::{Build, Choice, KindSpec, ParamSpec};
+use crate::kinds::{Build, Choice, Disagreement, KindSpec, ParamSpec, Params};
 use crate::lifecycle::{DeviceStatus, Startup};
 use crate::message::{Credential, Reply, Request, Update};
 use crate::queue::Bounded;
@@ -183,8 +183,38 @@ pub const KIND: KindSpec = KindSpec {
                 p.float("kd")? as f32,
             )))
         },
+        agrees: Some(agrees_with_stage),
     },
 };
+
+/// The stage encodes this motor's frames with its own model table, so it must hold this
+/// model's ranges for this id: otherwise a torque clamped to the device's model goes out
+/// scaled by another's (20 N·m on an AK70-10 behind an AK80-9 stage is sent as 25 N·m).
+fn agrees_with_stage(device: &Params, stage: &Params, id: u32) -> Result<(), Disagreement> {
+    // Parameters that do not parse are reported by the validator on their own.
+    let (Ok(model), Ok(at_stage)) = (
+        device.choice::<AkModel>("model"),
+        crate::protocol_stage::can_motors::stage_limits(stage, id),
+    ) else {
+        return Ok(());
+    };
+    let l = model.limits();
+    if l == at_stage {
+        return Ok(());
+    }
+    let ranges = |l: &Limits| format!("±{} rad, ±{} rad/s, ±{} N·m", l.p.max, l.v.max, l.t.max);
+    Err(Disagreement {
+        param: "model",
+        expected: format!(
+            "the same ranges as its can_motors stage, which encodes motor {id} with {} while {} \
+             has {}: set the stage's model (or its `models` entry \"{id}={}\") to this model",
+            ranges(&at_stage),
+            model.name(),
+            ranges(&l),
+            model.name(),
+        ),
+    })
+}
 
 #[cfg(test)]
 mod tests {

@@ -514,6 +514,7 @@ pub const DYNAMIXEL_X: KindSpec = KindSpec {
         protocols: &["dynamixel2"],
         safe_actions: REGISTER_SAFE,
         build: |p, cred| Ok(Box::new(dynamixel_x(p, cred)?)),
+        agrees: None,
     },
 };
 
@@ -595,5 +596,6 @@ pub const DYNAMIXEL1: KindSpec = KindSpec {
                 cred, model, zero, delay,
             )))
         },
+        agrees: None,
     },
 };

@@ -623,5 +623,6 @@ pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
                 p.float("kd")? as f32,
             )))
         },
+        agrees: None,
     },
 };

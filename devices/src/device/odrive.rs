@@ -660,5 +660,6 @@ pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
                 p.bool("poll")?,
             )))
         },
+        agrees: None,
     },
 };

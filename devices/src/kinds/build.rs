@@ -267,6 +267,21 @@ pub enum ProtocolBuild {
 /// How a device kind builds a device at its bus address.
 pub type DeviceBuild = fn(&Params, Credential) -> Result<Box<dyn Device>, BuildError>;
 
+/// A device kind's check that its parameters agree with those of the protocol stage it sits on
+/// (`device`, `protocol`, its bus `id`), run by the manifest validator: where the two describe
+/// the same thing (a motor model's ranges), a disagreement would encode commands wrongly.
+pub type ProtocolCheck =
+    fn(device: &Params, protocol: &Params, id: u32) -> Result<(), Disagreement>;
+
+/// What a [`ProtocolCheck`] found: the device parameter at fault and what was expected.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Disagreement {
+    /// The device's parameter that disagrees.
+    pub param: &'static str,
+    /// What the protocol stage says and what the device should say instead.
+    pub expected: String,
+}
+
 impl HardwareBuild {
     /// The medium carried.
     pub fn medium(&self) -> Medium {

@@ -18,8 +18,8 @@ mod common;
 mod spec;
 
 pub use build::{
-    baud, id_list, socket_addr, AnyHardware, BuildError, DeviceBuild, HardwareBuild, Invalid,
-    LinkBuild, OpenError, OpenedHardware, ProtocolBuild, Word,
+    baud, id_list, socket_addr, AnyHardware, BuildError, DeviceBuild, Disagreement, HardwareBuild,
+    Invalid, LinkBuild, OpenError, OpenedHardware, ProtocolBuild, ProtocolCheck, Word,
 };
 pub use choice::{Choice, UnknownChoice};
 pub use common::{BAUD_DOC, RETURN_DELAY_US, TIMEOUT_US};
@@ -61,6 +61,8 @@ pub enum Build {
         safe_actions: &'static [&'static str],
         /// Builds it.
         build: DeviceBuild,
+        /// Its parameters checked against its protocol stage's, where both describe one thing.
+        agrees: Option<ProtocolCheck>,
     },
 }
 
@@ -117,6 +119,14 @@ impl KindSpec {
         match self.build {
             Build::Device { safe_actions, .. } => safe_actions,
             _ => &[],
+        }
+    }
+
+    /// For devices: the check of its parameters against its protocol stage's, if any.
+    pub fn protocol_check(&self) -> Option<ProtocolCheck> {
+        match self.build {
+            Build::Device { agrees, .. } => agrees,
+            _ => None,
         }
     }
 }

@@ -341,6 +341,17 @@ pub fn mit_model(p: &crate::kinds::Params, name: &str) -> Result<Limits, crate::
     })
 }
 
+/// The ranges a `can_motors` stage with parameters `p` encodes motor `id`'s frames with: its
+/// `models` entry for that id, else its `model` (as [`CanMotorProtocol`] looks them up).
+pub fn stage_limits(p: &crate::kinds::Params, id: u32) -> Result<Limits, crate::kinds::BuildError> {
+    let table = parse_model_table(p.str("models")?)
+        .map_err(|e| crate::kinds::BuildError::invalid("models", e))?;
+    match table.iter().find(|(m, _)| u32::from(*m) == id) {
+        Some((_, l)) => Ok(*l),
+        None => mit_model(p, "model"),
+    }
+}
+
 /// The `can_motors` protocol kind.
 pub const KIND: crate::kinds::KindSpec = crate::kinds::KindSpec {
     kind: "can_motors",

@@ -484,6 +484,7 @@ pub const SIM_DEVICE: KindSpec = KindSpec {
         protocols: &["sim"],
         safe_actions: &["hold", "torque_off", "setpoint"],
         build: |_, cred| Ok(Box::new(SimDevice::new(cred))),
+        agrees: None,
     },
 };
 

@@ -314,6 +314,23 @@ pub(super) fn device(
     };
     let optional = t.bool(&mut cx.d, "optional").is_some_and(|b| b.value);
     let params = spec.and_then(|s| kind_params(&mut cx.d, t, s));
+    // A device that describes what its protocol stage also describes (a motor model) must agree.
+    if let (Some(check), Some(p), Some(i), Some(c)) =
+        (spec.and_then(|s| s.protocol_check()), &params, proto, cred)
+    {
+        if let Some(stage) = protos[i].def.as_ref() {
+            if let Err(d) = check(p, &stage.params, c.id) {
+                cx.d.error(
+                    &t.span_of(d.param).unwrap_or(name.span.clone()),
+                    &t.key_path(d.param),
+                    format!(
+                        "disagrees with protocol {:?}; expected {}",
+                        stage.name, d.expected
+                    ),
+                );
+            }
+        }
+    }
     if spec.is_none() {
         for k in t.keys() {
             t.touch(&k);
