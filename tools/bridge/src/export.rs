@@ -354,7 +354,9 @@ impl Exporter {
         if r < 0 {
             let e = std::io::Error::last_os_error();
             if e.kind() != std::io::ErrorKind::Interrupted {
-                return Err(crate::BridgeError::Thread(format!("waiting for ticks: {e}")));
+                return Err(crate::BridgeError::Thread(format!(
+                    "waiting for ticks: {e}"
+                )));
             }
             return Ok(());
         }
@@ -390,7 +392,10 @@ impl Exporter {
                         }
                     }
                     let Some(tick) = tick else { break };
-                    g.send(|e| e.pending.is_some_and(|p| p.tick == tick), &self.counters)?;
+                    g.send(
+                        |e| e.pending.is_some_and(|p| p.tick == tick),
+                        &self.counters,
+                    )?;
                 },
                 Some(p) => {
                     for e in &mut g.states {
@@ -552,7 +557,8 @@ impl Group {
         Envelope::set_seq(&mut self.envelope, self.seq);
         // Zenoh takes the bytes without copying them: one allocation per message (sized by the
         // last one), none per sample.
-        let payload = std::mem::replace(&mut self.buf, Vec::with_capacity(self.buf.capacity()));
+        let cap = self.buf.capacity();
+        let payload = std::mem::replace(&mut self.buf, Vec::with_capacity(cap));
         self.publisher
             .put(payload)
             .attachment(self.envelope.as_slice())

@@ -29,8 +29,8 @@ use zenoh::Wait;
 use crate::config::{any_matches, ImportConfig, Selector};
 use crate::counters::{Counters, RateLimit};
 use crate::error::{zenoh, Result};
-use crate::wire::{self, Catalog, CatalogEntry, Envelope, Heartbeat, Malformed};
 use crate::profile::{self, Stage};
+use crate::wire::{self, Catalog, CatalogEntry, Envelope, Heartbeat, Malformed};
 use crate::MIRROR_NODE_PREFIX;
 
 /// Inbound queue between Zenoh's threads and this one: at 1000 states × 1 kHz that is 16 ms of

@@ -556,7 +556,10 @@ mod tests {
         let mut buf = b.clone();
         begin_tick(&mut buf);
         push_tick_entry(&mut buf, 9, &s(8, 0.0));
-        assert_eq!(decode_tick(&buf).unwrap().collect::<Vec<_>>(), vec![(9, s(8, 0.0))]);
+        assert_eq!(
+            decode_tick(&buf).unwrap().collect::<Vec<_>>(),
+            vec![(9, s(8, 0.0))]
+        );
     }
 
     #[test]
@@ -568,13 +571,19 @@ mod tests {
         assert!(decode_tick(&encode_tick(&[])).is_err());
         let mut lie = good.clone();
         lie[0] = 3; // announces 3 entries, holds 2
-        assert!(matches!(decode_tick(&lie), Err(Malformed::Tick { count: 3, .. })));
+        assert!(matches!(
+            decode_tick(&lie),
+            Err(Malformed::Tick { count: 3, .. })
+        ));
         let mut pad = good.clone();
         pad[TICK_HEADER_BYTES + 5] = 1;
         assert!(decode_tick(&pad).is_err());
         // One foreign sample spoils the whole message.
         let mut foreign = good;
         foreign[TICK_HEADER_BYTES + TICK_ENTRY_BYTES + 8 + 42] = 0xff;
-        assert!(matches!(decode_tick(&foreign), Err(Malformed::Fields { .. })));
+        assert!(matches!(
+            decode_tick(&foreign),
+            Err(Malformed::Fields { .. })
+        ));
     }
 }

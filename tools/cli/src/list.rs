@@ -94,7 +94,11 @@ pub fn run(bus: &Bus, args: &ListArgs) -> Result<usize> {
             latest.map_or("-".into(), |l| {
                 // A mirror's t_sample_ns is on its owner's clock; its t_publish_ns is when it
                 // was received here: age on this machine's clock, never two clocks mixed.
-                let t = if mirrored { l.t_publish_ns } else { l.t_sample_ns };
+                let t = if mirrored {
+                    l.t_publish_ns
+                } else {
+                    l.t_sample_ns
+                };
                 out::age(now.saturating_sub(t) as f64 * 1e-9)
             }),
         ]);

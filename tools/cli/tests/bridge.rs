@@ -591,7 +591,10 @@ fn scenario(link: Link, tag: &str, inject: bool) {
                 + 8
                 + 43;
             msg[at] = 0x80;
-            z.put(&key, msg).attachment(foreign.encode()).wait().unwrap();
+            z.put(&key, msg)
+                .attachment(foreign.encode())
+                .wait()
+                .unwrap();
         }
         std::thread::sleep(Duration::from_millis(300));
         z.close().wait().unwrap();
@@ -723,7 +726,10 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     assert!(err_b.contains("marked STALE"), "{err_b}");
     // STALE only after 2 heartbeats of quiet, measured by the importer on its own clock.
     for quiet in quiet_ms(&err_b) {
-        assert!(quiet >= 2 * HEARTBEAT_MS, "marked STALE after {quiet} ms: {err_b}");
+        assert!(
+            quiet >= 2 * HEARTBEAT_MS,
+            "marked STALE after {quiet} ms: {err_b}"
+        );
     }
     assert!(err_b.contains("is back"), "{err_b}");
     assert!(counter(&err_b, "setpoints_refused") >= 1, "{err_b}");
@@ -826,12 +832,9 @@ fn launch_runs_and_supervises_the_bridge_of_a_manifest() {
     // SAFETY: kill(2) on the bridge the launcher (our child) started.
     unsafe { libc::kill(pid, libc::SIGKILL) };
     let mut mirror = StateSubscriber::with_buffer(&bus_b, "leg/knee", 64).unwrap();
-    wait_sample(
-        &mut mirror,
-        PATIENCE,
-        "STALE after the kill",
-        |s| s.status & status::STALE != 0,
-    );
+    wait_sample(&mut mirror, PATIENCE, "STALE after the kill", |s| {
+        s.status & status::STALE != 0
+    });
     wait_sample(
         &mut mirror,
         Duration::from_secs(20),
