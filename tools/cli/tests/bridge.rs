@@ -300,10 +300,10 @@ const PATIENCE: Duration = Duration::from_secs(30);
 /// after [`PATIENCE`]. Remote command frames more than `COMMAND_MAX_AGE` late are dropped by
 /// design (a returning link must not replay old setpoints), which a saturated machine can cause:
 /// resending is what an operator would do, and the checks stay on what arrives.
-fn resend_until(
+fn resend_until<T>(
     sub: &mut StateSubscriber,
     what: &str,
-    mut send: impl FnMut(),
+    mut send: impl FnMut() -> T,
     pred: impl Fn(&StateSample) -> bool,
 ) -> StateSample {
     let end = Instant::now() + PATIENCE;
