@@ -1,9 +1,13 @@
 //! The export side: local states out to Zenoh, remote command frames in to the owning executor.
 //!
-//! One thread with its own bus node (`bridge-export@<host>`). It sleeps on the exported
-//! subsystems' tick events (so a sample leaves right after its tick), then drains every exported
-//! state's subscription and puts each sample (or, with `rate_hz`, the newest one when due) on
-//! `conductor/<domain>/<subsystem>/<state>`. It never writes into an executor's memory except
+//! One thread with its own bus node (`bridge-export@<host>`). It sleeps in one `poll(2)` over the
+//! tick events of every exported subsystem (any number of them) and a wake-up descriptor that
+//! Zenoh's callback signals when a remote command frame arrives, so a tick's samples leave right
+//! after the tick and a command reaches its executor right after it arrives, with no polling
+//! interval in between. Per subsystem it drains the exported states' subscriptions and puts
+//! **one** Zenoh message per tick on `conductor/<domain>/<subsystem>` carrying every exported
+//! state that has a sample of that tick (or, with `rate_hz`, the newest samples when due), built
+//! in a buffer reused from tick to tick. It never writes into an executor's memory except
 //! through the ordinary command service, and an executor never waits for it: it reads the same
 //! shared-memory samples any local subscriber reads.
 
@@ -16,14 +20,15 @@ use conductor_bus::{
     monotonic_ns, Bus, CommandFrame, CommandSender, StateSample, StateSubscriber, TickWaiter,
 };
 use tracing::{info, warn};
-use zenoh::qos::CongestionControl;
+use zenoh::qos::{CongestionControl, Priority};
 use zenoh::Wait;
 
 use crate::config::{any_matches, ExportConfig, Selector};
 use crate::counters::{Counters, RateLimit};
 use crate::error::{zenoh, Result};
+use crate::profile::{self, Stage};
 use crate::wire::{self, Catalog, CatalogEntry, Envelope, Heartbeat, Malformed};
-use crate::MIRROR_NODE_PREFIX;
+use crate::{MIRROR_NODE_PREFIX, POLL};
 
 /// Queue of remote command frames between Zenoh's thread and this one (frames beyond are
 /// dropped and counted: commands are reliable on the link, bounded here).
@@ -32,15 +37,28 @@ const COMMAND_QUEUE: usize = 32;
 pub(crate) const RESCAN: Duration = Duration::from_secs(1);
 
 struct Exported {
-    subsystem: String,
     name: String,
     sub: StateSubscriber,
+    /// The next sample not yet sent: of a later tick than the message being built, or (with
+    /// `rate_hz`) the newest one until the next message is due.
+    pending: Option<StateSample>,
+    entry: CatalogEntry,
+}
+
+/// The exported states of one subsystem: one Zenoh publisher, one message per tick.
+struct Group {
+    subsystem: String,
+    states: Vec<Exported>,
     publisher: zenoh::pubsub::Publisher<'static>,
     seq: u64,
-    /// Newest sample not yet sent (rate-limited export).
-    pending: Option<StateSample>,
     next_due: Instant,
-    entry: CatalogEntry,
+    /// The tick message being built (allocated at the size of the last one).
+    buf: Vec<u8>,
+    /// Envelope bytes: the sequence number is rewritten in place per message.
+    envelope: Vec<u8>,
+    /// Woken by the owner's tick; `None` if the subsystem has no tick event (then the
+    /// thread's timeout bounds the delay).
+    waiter: Option<TickWaiter>,
 }
 
 /// A remote command frame as Zenoh delivered it.
@@ -62,9 +80,12 @@ pub(crate) struct Exporter {
     states_sel: Vec<Selector>,
     commands_sel: Vec<Selector>,
     rate_hz: Option<f64>,
-    exported: Vec<Exported>,
-    waiters: Vec<TickWaiter>,
-    waited_subsystems: Vec<String>,
+    groups: Vec<Group>,
+    /// `poll(2)` set: the command wake-up first, then the groups' tick listeners.
+    fds: Vec<libc::pollfd>,
+    /// Group of each `fds` entry after the first.
+    fd_group: Vec<usize>,
+    wake: Arc<Wake>,
     senders: HashMap<String, CommandSender>,
     frames: Receiver<RemoteFrame>,
     _commands: zenoh::pubsub::Subscriber<()>,
@@ -94,9 +115,11 @@ impl Exporter {
             .unwrap_or_else(|| bus.domain().name().to_string());
         let (tx, frames) = std::sync::mpsc::sync_channel::<RemoteFrame>(COMMAND_QUEUE);
         let c2 = counters.clone();
+        let wake = Arc::new(Wake::new()?);
+        let w2 = wake.clone();
         let commands = zs
             .declare_subscriber(wire::command_key(&domain, "*"))
-            .callback(move |s| queue_frame(&tx, &c2, s))
+            .callback(move |s| queue_frame(&tx, &c2, &w2, s))
             .wait()
             .map_err(zenoh("declaring the command subscriber"))?;
         let mut me = Self {
@@ -110,9 +133,10 @@ impl Exporter {
             states_sel: Selector::many(&cfg.states)?,
             commands_sel: Selector::many(&cfg.commands)?,
             rate_hz: cfg.rate_hz,
-            exported: Vec::new(),
-            waiters: Vec::new(),
-            waited_subsystems: Vec::new(),
+            groups: Vec::new(),
+            fds: Vec::new(),
+            fd_group: Vec::new(),
+            wake,
             senders: HashMap::new(),
             frames,
             _commands: commands,
@@ -123,13 +147,20 @@ impl Exporter {
             warn_refused: RateLimit::new(),
             catalog_version: 0,
         };
+        me.rebuild_poll_set();
         me.rescan()?;
         Ok(me)
     }
 
     /// Number of states exported now.
     pub(crate) fn len(&self) -> usize {
-        self.exported.len()
+        self.groups.iter().map(|g| g.states.len()).sum()
+    }
+
+    /// Whether something exported has no event to wake the thread (a rate-limited export, or
+    /// a subsystem without a tick event), so the thread must wake every [`POLL`].
+    pub(crate) fn needs_polling(&self) -> bool {
+        self.rate_hz.is_some() || self.groups.iter().any(|g| g.waiter.is_none())
     }
 
     /// The key-expression domain.
@@ -155,10 +186,9 @@ impl Exporter {
         for s in all {
             if !any_matches(&self.states_sel, &s.subsystem, &s.name)
                 || s.nodes.iter().any(|n| n.starts_with(MIRROR_NODE_PREFIX))
-                || self
-                    .exported
-                    .iter()
-                    .any(|e| e.subsystem == s.subsystem && e.name == s.name)
+                || self.groups.iter().any(|g| {
+                    g.subsystem == s.subsystem && g.states.iter().any(|e| e.name == s.name)
+                })
             {
                 continue;
             }
@@ -167,14 +197,6 @@ impl Exporter {
                 // It vanished between listing and opening: the next rescan tries again.
                 Err(_) => continue,
             };
-            let key = wire::state_key(&self.domain, &s.subsystem, &s.name);
-            let publisher = self
-                .zs
-                .declare_publisher(key)
-                // Latest-value: a congested link drops samples, never queues them.
-                .congestion_control(CongestionControl::Drop)
-                .wait()
-                .map_err(zenoh("declaring a state publisher"))?;
             let m = &s.meta;
             let remote_cmd = m.writable && any_matches(&self.commands_sel, &s.subsystem, &s.name);
             let entry = CatalogEntry {
@@ -188,37 +210,94 @@ impl Exporter {
                 max: m.max.is_finite().then_some(m.max),
                 device: m.device.clone(),
             };
-            if !self.waited_subsystems.contains(&s.subsystem) && self.waiters.len() < 16 {
-                if let Ok(w) = TickWaiter::new(&self.bus, &s.subsystem) {
-                    self.waiters.push(w);
-                    self.waited_subsystems.push(s.subsystem.clone());
+            let gi = match self.groups.iter().position(|g| g.subsystem == s.subsystem) {
+                Some(gi) => gi,
+                None => {
+                    self.groups.push(self.group(&s.subsystem)?);
+                    self.groups.len() - 1
                 }
-            }
-            self.exported.push(Exported {
-                subsystem: s.subsystem.clone(),
+            };
+            self.groups[gi].states.push(Exported {
                 name: s.name.clone(),
                 sub,
-                publisher,
-                seq: 0,
                 pending: None,
-                next_due: Instant::now(),
                 entry,
             });
             added += 1;
         }
         if added > 0 {
-            self.exported.sort_by(|a, b| {
-                (a.subsystem.as_str(), a.entry.index).cmp(&(b.subsystem.as_str(), b.entry.index))
-            });
+            self.groups.sort_by(|a, b| a.subsystem.cmp(&b.subsystem));
+            for g in &mut self.groups {
+                g.states.sort_by_key(|e| e.entry.index);
+            }
+            self.rebuild_poll_set();
             self.catalog_version = self.catalog_version.wrapping_add(1);
             info!(
-                "exporting {} state(s) as conductor/{}/<subsystem>/<state> ({} accept remote commands)",
-                self.exported.len(),
+                "exporting {} state(s) of {} subsystem(s) as conductor/{}/<subsystem> ({} accept \
+                 remote commands, {} woken by their tick)",
+                self.len(),
+                self.groups.len(),
                 self.domain,
-                self.exported.iter().filter(|e| e.entry.writable).count()
+                self.groups
+                    .iter()
+                    .flat_map(|g| &g.states)
+                    .filter(|e| e.entry.writable)
+                    .count(),
+                self.groups.iter().filter(|g| g.waiter.is_some()).count()
             );
         }
         Ok(())
+    }
+
+    fn group(&self, subsystem: &str) -> Result<Group> {
+        let publisher = self
+            .zs
+            .declare_publisher(wire::tick_key(&self.domain, subsystem))
+            // Latest-value: a congested link drops tick messages, never queues them.
+            .congestion_control(CongestionControl::Drop)
+            // One message per tick: nothing to batch it with, send it now.
+            .express(true)
+            .wait()
+            .map_err(zenoh("declaring a subsystem's publisher"))?;
+        let waiter = match TickWaiter::new(&self.bus, subsystem) {
+            Ok(w) => Some(w),
+            Err(e) => {
+                warn!("no tick event for {subsystem} ({e}): its states are polled every {POLL:?}");
+                None
+            }
+        };
+        Ok(Group {
+            subsystem: subsystem.into(),
+            states: Vec::new(),
+            publisher,
+            seq: 0,
+            next_due: Instant::now(),
+            buf: Vec::new(),
+            envelope: Envelope {
+                host: self.host.clone(),
+                session: self.session,
+                seq: 0,
+            }
+            .encode(),
+            waiter,
+        })
+    }
+
+    fn rebuild_poll_set(&mut self) {
+        let fd = |fd| libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        self.fds.clear();
+        self.fd_group.clear();
+        self.fds.push(fd(self.wake.fd()));
+        for (gi, g) in self.groups.iter().enumerate() {
+            if let Some(w) = &g.waiter {
+                self.fds.push(fd(w.raw_fd()));
+                self.fd_group.push(gi);
+            }
+        }
     }
 
     /// The catalog of what is exported now.
@@ -228,7 +307,12 @@ impl Exporter {
             session: self.session,
             version: self.catalog_version,
             heartbeat_ms: self.heartbeat.as_millis() as u64,
-            states: self.exported.iter().map(|e| e.entry.clone()).collect(),
+            states: self
+                .groups
+                .iter()
+                .flat_map(|g| &g.states)
+                .map(|e| e.entry.clone())
+                .collect(),
         }
     }
 
@@ -241,6 +325,9 @@ impl Exporter {
         self.zs
             .put(wire::heartbeat_key(&self.domain, &self.host), hb.encode())
             .congestion_control(CongestionControl::Drop)
+            // Ahead of tick messages in Zenoh's queues: a busy link is not a quiet one.
+            .priority(Priority::DataHigh)
+            .express(true)
             .wait()
             .map_err(zenoh("putting the heartbeat"))
     }
@@ -254,34 +341,73 @@ impl Exporter {
             .map_err(zenoh("putting the catalog"))
     }
 
-    /// Waits for the next tick of an exported subsystem (at most `timeout`).
+    /// Sleeps until an exported subsystem ticks or a remote command frame arrives (at most
+    /// `timeout`): one `poll(2)` over every tick listener, whatever their number. Allocation-free.
     pub(crate) fn wait(&mut self, timeout: Duration) -> Result<()> {
-        if self.waiters.is_empty() {
-            std::thread::sleep(timeout);
-        } else {
-            TickWaiter::wait_any(&mut self.waiters, timeout)?;
+        let ms = timeout.as_millis().clamp(0, i32::MAX as u128) as i32;
+        for p in &mut self.fds {
+            p.revents = 0;
+        }
+        // SAFETY: `fds` is a valid, initialised array of `fds.len()` entries; its descriptors
+        // belong to the wake-up and to listeners owned by `self`, alive during the call.
+        let r = unsafe { libc::poll(self.fds.as_mut_ptr(), self.fds.len() as libc::nfds_t, ms) };
+        if r < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(crate::BridgeError::Thread(format!(
+                    "waiting for ticks: {e}"
+                )));
+            }
+            return Ok(());
+        }
+        if self.fds[0].revents != 0 {
+            self.wake.drain();
+        }
+        for (p, &gi) in self.fds[1..].iter().zip(&self.fd_group) {
+            if p.revents != 0 {
+                if let Some(w) = &mut self.groups[gi].waiter {
+                    w.try_consume()?;
+                }
+            }
         }
         Ok(())
     }
 
-    /// Sends what the local states published since the last call.
+    /// Sends what the local states published since the last call: one message per subsystem
+    /// and tick.
     pub(crate) fn pump_states(&mut self) -> Result<()> {
         let now = Instant::now();
         let period = self.rate_hz.map(|r| Duration::from_secs_f64(1.0 / r));
-        for e in &mut self.exported {
-            while let Some(s) = e.sub.receive()? {
-                e.pending = Some(s);
-                if period.is_none() {
-                    send(&self.host, self.session, e, &s, &self.counters)?;
-                    e.pending = None;
-                }
-            }
-            if let (Some(p), Some(s)) = (period, e.pending) {
-                if now >= e.next_due {
-                    send(&self.host, self.session, e, &s, &self.counters)?;
-                    e.pending = None;
-                    // Keep the cadence, but never bunch up after a pause.
-                    e.next_due = (e.next_due + p).max(now);
+        for g in &mut self.groups {
+            match period {
+                None => loop {
+                    // The oldest tick any state has a sample of goes first, alone.
+                    let mut tick = None::<u64>;
+                    for e in &mut g.states {
+                        if e.pending.is_none() {
+                            e.pending = e.sub.receive()?;
+                        }
+                        if let Some(p) = &e.pending {
+                            tick = Some(tick.map_or(p.tick, |t| t.min(p.tick)));
+                        }
+                    }
+                    let Some(tick) = tick else { break };
+                    g.send(
+                        |e| e.pending.is_some_and(|p| p.tick == tick),
+                        &self.counters,
+                    )?;
+                },
+                Some(p) => {
+                    for e in &mut g.states {
+                        while let Some(s) = e.sub.receive()? {
+                            e.pending = Some(s);
+                        }
+                    }
+                    if now >= g.next_due && g.states.iter().any(|e| e.pending.is_some()) {
+                        g.send(|e| e.pending.is_some(), &self.counters)?;
+                        // Keep the cadence, but never bunch up after a pause.
+                        g.next_due = (g.next_due + p).max(now);
+                    }
                 }
             }
         }
@@ -348,10 +474,12 @@ impl Exporter {
         };
         let mut refused = Vec::new();
         for sp in frame.setpoints() {
-            let ok = self
-                .exported
-                .iter()
-                .any(|e| e.subsystem == sub && e.entry.index == sp.index && e.entry.writable);
+            let ok = self.groups.iter().any(|g| {
+                g.subsystem == sub
+                    && g.states
+                        .iter()
+                        .any(|e| e.entry.index == sp.index && e.entry.writable)
+            });
             if ok {
                 out.push(sp.index, sp.value);
             } else {
@@ -408,36 +536,91 @@ impl Exporter {
 /// are dropped: a link that comes back must not replay stale setpoints.
 pub const COMMAND_MAX_AGE: Duration = Duration::from_millis(250);
 
-fn send(
-    host: &str,
-    session: u64,
-    e: &mut Exported,
-    s: &StateSample,
-    counters: &Counters,
-) -> Result<()> {
-    e.seq += 1;
-    let env = Envelope {
-        host: host.into(),
-        session,
-        seq: e.seq,
-    };
-    e.publisher
-        .put(wire::encode_sample(s).to_vec())
-        .attachment(env.encode())
-        .wait()
-        .map_err(zenoh("putting a state sample"))?;
-    Counters::bump(&counters.exported);
-    Ok(())
+impl Group {
+    /// Puts one tick message with the pending samples of the states `pick` selects (and clears
+    /// them).
+    fn send(&mut self, pick: impl Fn(&Exported) -> bool, counters: &Counters) -> Result<()> {
+        wire::begin_tick(&mut self.buf);
+        let mut first_t = None;
+        let mut n = 0;
+        for e in &mut self.states {
+            if pick(e) {
+                let s = e.pending.take().expect("picked states have a sample");
+                wire::push_tick_entry(&mut self.buf, e.entry.index, &s);
+                first_t.get_or_insert(s.t_sample_ns);
+                n += 1;
+            }
+        }
+        let Some(t) = first_t else { return Ok(()) };
+        profile::record(Stage::ExportReceived, t);
+        self.seq += 1;
+        Envelope::set_seq(&mut self.envelope, self.seq);
+        // Zenoh takes the bytes without copying them: one allocation per message (sized by the
+        // last one), none per sample.
+        let cap = self.buf.capacity();
+        let payload = std::mem::replace(&mut self.buf, Vec::with_capacity(cap));
+        self.publisher
+            .put(payload)
+            .attachment(self.envelope.as_slice())
+            .wait()
+            .map_err(zenoh("putting a tick message"))?;
+        profile::record(Stage::ExportPut, t);
+        counters
+            .exported
+            .fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        Ok(())
+    }
 }
 
-fn queue_frame(tx: &SyncSender<RemoteFrame>, counters: &Counters, s: zenoh::sample::Sample) {
+/// Wakes the export thread from Zenoh's callback (an `eventfd`, part of its `poll(2)` set).
+struct Wake {
+    fd: std::os::fd::OwnedFd,
+}
+
+impl Wake {
+    fn new() -> Result<Self> {
+        // SAFETY: eventfd has no memory preconditions; the result is checked before use.
+        let fd = unsafe { libc::eventfd(0, libc::EFD_NONBLOCK | libc::EFD_CLOEXEC) };
+        if fd < 0 {
+            let e = std::io::Error::last_os_error();
+            return Err(crate::BridgeError::Thread(format!("eventfd: {e}")));
+        }
+        // SAFETY: `fd` was just opened by eventfd and is owned by nobody else.
+        let fd = unsafe { <std::os::fd::OwnedFd as std::os::fd::FromRawFd>::from_raw_fd(fd) };
+        Ok(Self { fd })
+    }
+
+    fn fd(&self) -> i32 {
+        std::os::fd::AsRawFd::as_raw_fd(&self.fd)
+    }
+
+    fn notify(&self) {
+        let one = 1u64.to_ne_bytes();
+        // SAFETY: writes 8 bytes from a live buffer to our eventfd; failure (counter full)
+        // only means a wake-up is already pending.
+        let _ = unsafe { libc::write(self.fd(), one.as_ptr().cast(), one.len()) };
+    }
+
+    fn drain(&self) {
+        let mut v = [0u8; 8];
+        // SAFETY: reads at most 8 bytes into a live buffer from our non-blocking eventfd.
+        let _ = unsafe { libc::read(self.fd(), v.as_mut_ptr().cast(), v.len()) };
+    }
+}
+
+fn queue_frame(
+    tx: &SyncSender<RemoteFrame>,
+    counters: &Counters,
+    wake: &Wake,
+    s: zenoh::sample::Sample,
+) {
     let f = RemoteFrame {
         key: s.key_expr().as_str().to_string(),
         payload: s.payload().to_bytes().into_owned(),
         attachment: s.attachment().map(|a| a.to_bytes().into_owned()),
     };
     match tx.try_send(f) {
-        Ok(()) => {}
+        Ok(()) => wake.notify(),
         Err(TrySendError::Full(_)) => {
             Counters::bump(&counters.commands_dropped);
         }

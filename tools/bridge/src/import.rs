@@ -1,10 +1,12 @@
 //! The import side: remote states in from Zenoh as local mirror states, local command frames for
 //! those mirrors out to the owning host.
 //!
-//! One thread. Zenoh's callbacks only copy a message into a bounded queue; this thread checks
-//! it (envelope, ABI size and fields, a catalog that declares the state, a sequence newer than
-//! the last) and publishes it on the mirror through an ordinary [`StatePublisher`], so every
-//! local tool reads it as a state. Mirrors of one remote host live on a bus node called
+//! One thread. Zenoh's callbacks only move a message into a bounded queue (waking this thread);
+//! this thread checks it (envelope, tick message size and every sample's ABI fields, a catalog
+//! that declares the subsystem, a sequence newer than the last) and publishes its samples on the
+//! mirror through an ordinary [`StatePublisher`], then notifies the mirror's tick event once, so
+//! every local tool reads them as states and a controller can wait on a mirror's tick as on a
+//! local one. Mirrors of one remote host live on a bus node called
 //! `bridge@<host>`, which is how `conductor list` tells whose a state is.
 //!
 //! A host whose heartbeats and samples stop for two heartbeat periods has every mirror
@@ -27,6 +29,7 @@ use zenoh::Wait;
 use crate::config::{any_matches, ImportConfig, Selector};
 use crate::counters::{Counters, RateLimit};
 use crate::error::{zenoh, Result};
+use crate::profile::{self, Stage};
 use crate::wire::{self, Catalog, CatalogEntry, Envelope, Heartbeat, Malformed};
 use crate::MIRROR_NODE_PREFIX;
 
@@ -80,14 +83,16 @@ struct Rule {
 struct MirrorState {
     owner_index: u32,
     writable: bool,
-    last_seq: u64,
     last: Option<StateSample>,
 }
 
 struct Mirror {
     owner_sub: String,
     name: String,
+    /// In the owner's index order (the catalog's), so an owner index is found by binary search.
     entries: Vec<CatalogEntry>,
+    /// Sequence number of the last tick message published (per owner session).
+    last_seq: u64,
     publisher: StatePublisher,
     commands: CommandReceiver,
     states: Vec<MirrorState>,
@@ -105,8 +110,8 @@ struct Remote {
     last_query: Option<Instant>,
     stale: bool,
     mirrors: Vec<Mirror>,
-    /// subsystem → state → (mirror, state index); looked up by `&str`, no allocation per sample.
-    index: HashMap<String, HashMap<String, (usize, usize)>>,
+    /// owner's subsystem → mirror; looked up by `&str`, no allocation per message.
+    index: HashMap<String, usize>,
 }
 
 /// Everything the import thread owns.
@@ -135,6 +140,11 @@ fn enqueue(
     what: What,
     sample: zenoh::sample::Sample,
 ) {
+    if what == What::Sample && profile::enabled() {
+        if let Some(t) = wire::tick_first_t_sample(&sample.payload().to_bytes()) {
+            profile::record(Stage::ImportArrived, t);
+        }
+    }
     let m = Inbound { rule, what, sample };
     if let Err(TrySendError::Full(_)) = tx.try_send(m) {
         Counters::bump(&counters.overflow);
@@ -157,7 +167,7 @@ impl Importer {
         let mut parsed = Vec::new();
         for (i, r) in rules.iter().enumerate() {
             for (what, key) in [
-                (What::Sample, format!("conductor/{}/*/*", r.domain)),
+                (What::Sample, wire::tick_key(&r.domain, "*")),
                 (What::Heartbeat, wire::heartbeat_key(&r.domain, "*")),
                 (What::Catalog, wire::catalog_key(&r.domain, "*")),
             ] {
@@ -223,8 +233,12 @@ impl Importer {
         match self.rx.recv_timeout(timeout) {
             Ok(m) => {
                 self.handle(m);
-                while let Ok(m) = self.rx.try_recv() {
-                    self.handle(m);
+                // Bounded, so commands and link checks are served even under a flood.
+                for _ in 0..INBOUND_QUEUE {
+                    match self.rx.try_recv() {
+                        Ok(m) => self.handle(m),
+                        Err(_) => break,
+                    }
                 }
             }
             Err(RecvTimeoutError::Timeout) | Err(RecvTimeoutError::Disconnected) => {}
@@ -356,13 +370,14 @@ impl Importer {
                 None => by_sub.push((e.subsystem.clone(), vec![e.clone()])),
             }
         }
+        for (_, v) in &mut by_sub {
+            v.sort_by_key(|e| e.index);
+        }
         let local = self.domain_states();
         let r = &mut self.remotes[i];
         if new_session {
             for m in &mut r.mirrors {
-                for s in &mut m.states {
-                    s.last_seq = 0;
-                }
+                m.last_seq = 0;
             }
         }
         // Keep mirrors whose states did not change; rebuild the others.
@@ -420,12 +435,7 @@ impl Importer {
         r.mirrors = kept;
         r.index.clear();
         for (mi, m) in r.mirrors.iter().enumerate() {
-            for (si, e) in m.entries.iter().enumerate() {
-                r.index
-                    .entry(m.owner_sub.clone())
-                    .or_default()
-                    .insert(e.state.clone(), (mi, si));
-            }
+            r.index.insert(m.owner_sub.clone(), mi);
         }
         self.mark_live(i);
         Ok(())
@@ -443,58 +453,75 @@ impl Importer {
 
     fn on_sample(&mut self, m: &Inbound) -> std::result::Result<(), Malformed> {
         let rule = m.rule;
-        let (sub, state) = wire::split_state_key(&self.rules[rule].domain, m.key())?;
+        let sub = wire::split_tick_key(&self.rules[rule].domain, m.key())?;
         let env = Envelope::decode(&m.attachment().ok_or(Malformed::Envelope)?)?;
-        let s = wire::decode_sample(&m.payload())?;
+        let payload = m.payload();
+        if let Some(t) = wire::tick_first_t_sample(&payload).filter(|_| profile::enabled()) {
+            profile::record(Stage::ImportTaken, t);
+        }
+        let entries = wire::decode_tick(&payload)?;
         let Some(i) = self.remote(rule, &env.host) else {
-            return self.unknown(&env.host, sub, state, "no catalog from that host yet");
+            return self.unknown(&env.host, sub, "no catalog from that host yet");
         };
         let r = &mut self.remotes[i];
         if r.session != env.session {
-            return self.unknown(
-                &env.host,
-                sub,
-                state,
-                "from another session than its catalog",
-            );
+            return self.unknown(&env.host, sub, "from another session than its catalog");
         }
-        let Some(&(mi, si)) = r.index.get(sub).and_then(|m| m.get(state)) else {
+        let Some(&mi) = r.index.get(sub) else {
             // Exported but not imported by this rule, or not in the host's catalog.
             Counters::bump(&self.counters.unknown);
             return Ok(());
         };
-        let ms = &mut r.mirrors[mi].states[si];
-        if env.seq <= ms.last_seq {
+        let mirror = &mut r.mirrors[mi];
+        if env.seq <= mirror.last_seq {
             Counters::bump(&self.counters.out_of_order);
             return Ok(());
         }
-        ms.last_seq = env.seq;
-        ms.last = Some(s);
-        let mirror = &mut r.mirrors[mi];
-        match mirror
-            .publisher
-            .publish(si, s.tick, s.t_sample_ns, s.value, s.status)
-        {
-            Ok(_) => {
-                Counters::bump(&self.counters.imported);
+        mirror.last_seq = env.seq;
+        let mut first_t = None;
+        let mut n = 0;
+        for (owner_index, s) in entries {
+            first_t.get_or_insert(s.t_sample_ns);
+            // States of the subsystem this rule does not import are not mirrored.
+            let Ok(si) = mirror
+                .entries
+                .binary_search_by_key(&owner_index, |e| e.index)
+            else {
+                continue;
+            };
+            mirror.states[si].last = Some(s);
+            match mirror
+                .publisher
+                .publish(si, s.tick, s.t_sample_ns, s.value, s.status)
+            {
+                Ok(_) => n += 1,
+                Err(e) => warn!(
+                    "cannot publish the mirror {}/{}: {e}",
+                    mirror.name, mirror.entries[si].state
+                ),
             }
-            Err(e) => warn!("cannot publish the mirror {}/{state}: {e}", mirror.name),
+        }
+        if n > 0 {
+            // Wakes whoever waits on the mirror's tick, as the owner's tick wakes local waiters.
+            if let Err(e) = mirror.publisher.notify_tick() {
+                warn!("cannot notify the tick of mirror {}: {e}", mirror.name);
+            }
+            self.counters
+                .imported
+                .fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        }
+        if let Some(t) = first_t {
+            profile::record(Stage::ImportPublished, t);
         }
         self.mark_live(i);
         Ok(())
     }
 
-    fn unknown(
-        &mut self,
-        host: &str,
-        sub: &str,
-        state: &str,
-        why: &str,
-    ) -> std::result::Result<(), Malformed> {
+    fn unknown(&mut self, host: &str, sub: &str, why: &str) -> std::result::Result<(), Malformed> {
         let n = Counters::bump(&self.counters.unknown);
         if let Some(held) = self.warn_unknown.allow() {
             info!(
-                "ignored a sample of {sub}/{state} from {host}: {why} ({n} ignored so far, \
+                "ignored a tick message of {sub} from {host}: {why} ({n} ignored so far, \
                  {held} not logged)"
             );
         }
@@ -613,6 +640,9 @@ fn make_mirror(
     name: &str,
     entries: Vec<CatalogEntry>,
 ) -> Result<Mirror> {
+    let mut entries = entries;
+    // The catalog lists them in index order already; the lookup by owner index relies on it.
+    entries.sort_by_key(|e| e.index);
     let specs: Vec<StateSpec> = entries
         .iter()
         .enumerate()
@@ -626,7 +656,6 @@ fn make_mirror(
         .map(|e| MirrorState {
             owner_index: e.index,
             writable: e.writable,
-            last_seq: 0,
             last: None,
         })
         .collect();
@@ -634,6 +663,7 @@ fn make_mirror(
         owner_sub: owner_sub.into(),
         name: name.into(),
         entries,
+        last_seq: 0,
         publisher,
         commands,
         states,

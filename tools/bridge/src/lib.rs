@@ -5,6 +5,7 @@ pub mod counters;
 pub mod error;
 mod export;
 mod import;
+pub mod profile;
 pub mod wire;
 
 use std::sync::mpsc;
@@ -42,8 +43,9 @@ pub struct Ready {
     pub imports: usize,
 }
 
-/// How long a bridge thread waits for work before looking at its timers.
-const POLL: Duration = Duration::from_millis(1);
+/// How long a bridge thread waits for work before looking at its timers (work itself wakes it:
+/// ticks, command frames and inbound messages are events).
+pub(crate) const POLL: Duration = Duration::from_millis(1);
 
 fn session_id() -> u64 {
     use std::hash::{BuildHasher, Hasher};
@@ -126,7 +128,16 @@ pub fn run(
             let mut next_hb = Instant::now();
             let mut next_scan = Instant::now() + export::RESCAN;
             while !stop() {
-                ex.wait(POLL)?;
+                // Ticks and command frames wake the thread; otherwise it sleeps until the next
+                // heartbeat or rescan (or polls, for what has no event: rate-limited export,
+                // a subsystem without a tick event).
+                let now = Instant::now();
+                let timeout = if ex.needs_polling() {
+                    POLL
+                } else {
+                    next_hb.min(next_scan).saturating_duration_since(now)
+                };
+                ex.wait(timeout)?;
                 ex.pump_states()?;
                 ex.pump_commands()?;
                 let now = Instant::now();

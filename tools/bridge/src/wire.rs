@@ -3,13 +3,16 @@
 //!
 //! | key expression | payload | attachment |
 //! |---|---|---|
-//! | `conductor/<domain>/<subsystem>/<state>` | the 48 ABI bytes of a `StateSample`, unchanged | [`Envelope`] |
+//! | `conductor/<domain>/<subsystem>` | a tick message: the exported states of the subsystem that have a sample of one tick, each as its owner's index and the 48 ABI bytes of its `StateSample`, unchanged (see [`encode_tick`]) | [`Envelope`] |
 //! | `conductor/<domain>/@bridge/<host>/hb` | [`Heartbeat`] (24 bytes) | — |
 //! | `conductor/<domain>/@bridge/<host>/catalog` | [`Catalog`] as JSON | — |
 //! | `conductor/<domain>/@cmd/<subsystem>` | the 1048 ABI bytes of a `CommandFrame` | [`Envelope`] |
 //!
 //! `@bridge` and `@cmd` are Zenoh verbatim chunks: `*` and `**` never match them, so a
-//! subscriber on `conductor/<domain>/*/*` sees only states.
+//! subscriber on `conductor/<domain>/*` sees only tick messages.
+//!
+//! One message per subsystem and tick, not one per state: at 1 000 states × 1 kHz that is 1 000
+//! Zenoh messages a second instead of a million, which is what lets that load cross the link.
 
 use conductor_bus::{CommandFrame, Setpoint, StateMeta, StateSample, MAX_SETPOINTS};
 use serde::{Deserialize, Serialize};
@@ -22,6 +25,10 @@ pub const SAMPLE_BYTES: usize = 48;
 pub const FRAME_BYTES: usize = 24 + 16 * MAX_SETPOINTS;
 /// Longest host name (it is a key-expression chunk and part of an iceoryx2 node name).
 pub const MAX_HOST: usize = 64;
+/// Bytes before the entries of a tick message: entry count u32, 4 zero bytes.
+pub const TICK_HEADER_BYTES: usize = 8;
+/// Bytes of one entry of a tick message: the owner's state index u32, 4 zero bytes, the sample.
+pub const TICK_ENTRY_BYTES: usize = 8 + SAMPLE_BYTES;
 /// Every status bit the ABI defines (bits 0–8); a sample with another bit set is foreign.
 pub const KNOWN_STATUS: u32 = (1 << 9) - 1;
 
@@ -52,9 +59,17 @@ pub enum Malformed {
         /// The reserved word.
         reserved: u32,
     },
-    /// A key that is not `conductor/<domain>/<subsystem>/<state>` with valid names.
-    #[error("key {0:?} is not conductor/<domain>/<subsystem>/<state>")]
+    /// A key that is not `conductor/<domain>/<subsystem>` with a valid name.
+    #[error("key {0:?} is not conductor/<domain>/<subsystem>")]
     Key(String),
+    /// A tick message whose header does not match its length, or with a non-zero pad.
+    #[error("tick message of {len} bytes does not hold {count} entries")]
+    Tick {
+        /// Bytes received.
+        len: usize,
+        /// Entries the header announces.
+        count: u32,
+    },
     /// A catalog that is not valid JSON of the expected shape.
     #[error("catalog: {0}")]
     Catalog(String),
@@ -81,6 +96,12 @@ impl Envelope {
         v.push(self.host.len() as u8);
         v.extend_from_slice(self.host.as_bytes());
         v
+    }
+
+    /// Rewrites the sequence number of encoded envelope bytes in place (no allocation per
+    /// message on the sending side).
+    pub fn set_seq(encoded: &mut [u8], seq: u64) {
+        encoded[MAGIC.len() + 8..MAGIC.len() + 16].copy_from_slice(&seq.to_le_bytes());
     }
 
     /// Parses an attachment.
@@ -163,6 +184,94 @@ pub fn decode_sample(b: &[u8]) -> Result<StateSample, Malformed> {
     }
     Ok(s)
 }
+
+/// Starts a tick message in `buf` (cleared; its capacity is kept, so a reused buffer does not
+/// allocate). Add entries with [`push_tick_entry`].
+pub fn begin_tick(buf: &mut Vec<u8>) {
+    buf.clear();
+    buf.extend_from_slice(&[0u8; TICK_HEADER_BYTES]);
+}
+
+/// Appends the sample of the owner's state `index` to the tick message in `buf`.
+pub fn push_tick_entry(buf: &mut Vec<u8>, index: u32, s: &StateSample) {
+    buf.extend_from_slice(&index.to_le_bytes());
+    buf.extend_from_slice(&[0u8; 4]);
+    buf.extend_from_slice(&encode_sample(s));
+    let count = ((buf.len() - TICK_HEADER_BYTES) / TICK_ENTRY_BYTES) as u32;
+    buf[0..4].copy_from_slice(&count.to_le_bytes());
+}
+
+/// A whole tick message: `count u32 | 0u32 | count × (index u32 | 0u32 | 48 ABI bytes)`.
+pub fn encode_tick(entries: &[(u32, StateSample)]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(TICK_HEADER_BYTES + entries.len() * TICK_ENTRY_BYTES);
+    begin_tick(&mut b);
+    for (i, s) in entries {
+        push_tick_entry(&mut b, *i, s);
+    }
+    b
+}
+
+/// Checks a whole tick message (header, length, every sample) and returns its entries, in the
+/// order sent. One bad entry makes the whole message malformed: nothing of it is published.
+pub fn decode_tick(b: &[u8]) -> Result<TickEntries<'_>, Malformed> {
+    if b.len() < TICK_HEADER_BYTES {
+        return Err(Malformed::Size {
+            got: b.len(),
+            expected: TICK_HEADER_BYTES + TICK_ENTRY_BYTES,
+        });
+    }
+    let count = u32_at(b, 0);
+    let body = &b[TICK_HEADER_BYTES..];
+    if count == 0
+        || u32_at(b, 4) != 0
+        || body.len() % TICK_ENTRY_BYTES != 0
+        || body.len() / TICK_ENTRY_BYTES != count as usize
+    {
+        return Err(Malformed::Tick {
+            len: b.len(),
+            count,
+        });
+    }
+    for e in body.chunks_exact(TICK_ENTRY_BYTES) {
+        if u32_at(e, 4) != 0 {
+            return Err(Malformed::Tick {
+                len: b.len(),
+                count,
+            });
+        }
+        decode_sample(&e[8..])?;
+    }
+    Ok(TickEntries {
+        chunks: body.chunks_exact(TICK_ENTRY_BYTES),
+    })
+}
+
+/// `t_sample_ns` of the first entry of a tick message, unchecked (for profiling).
+pub fn tick_first_t_sample(b: &[u8]) -> Option<u64> {
+    let at = TICK_HEADER_BYTES + 8 + 16;
+    b.get(at..at + 8).map(|_| u64_at(b, at))
+}
+
+/// The entries of a checked tick message: `(owner's state index, sample)`.
+pub struct TickEntries<'a> {
+    chunks: std::slice::ChunksExact<'a, u8>,
+}
+
+impl Iterator for TickEntries<'_> {
+    type Item = (u32, StateSample);
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let e = self.chunks.next()?;
+        let s = decode_sample(&e[8..]).expect("checked by decode_tick");
+        Some((u32_at(e, 0), s))
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        self.chunks.size_hint()
+    }
+}
+
+impl ExactSizeIterator for TickEntries<'_> {}
 
 /// The ABI bytes of a command frame.
 pub fn encode_frame(f: &CommandFrame) -> Vec<u8> {
@@ -312,9 +421,9 @@ impl Catalog {
     }
 }
 
-/// Key of a state: `conductor/<domain>/<subsystem>/<state>`.
-pub fn state_key(domain: &str, subsystem: &str, state: &str) -> String {
-    format!("conductor/{domain}/{subsystem}/{state}")
+/// Key of a subsystem's tick messages: `conductor/<domain>/<subsystem>`.
+pub fn tick_key(domain: &str, subsystem: &str) -> String {
+    format!("conductor/{domain}/{subsystem}")
 }
 
 /// Key of a bridge's heartbeat.
@@ -332,21 +441,18 @@ pub fn command_key(domain: &str, subsystem: &str) -> String {
     format!("conductor/{domain}/@cmd/{subsystem}")
 }
 
-/// `(subsystem, state)` of a state key of `domain`.
-pub fn split_state_key<'a>(domain: &str, key: &'a str) -> Result<(&'a str, &'a str), Malformed> {
+/// The subsystem of a tick key of `domain`.
+pub fn split_tick_key<'a>(domain: &str, key: &'a str) -> Result<&'a str, Malformed> {
     let bad = || Malformed::Key(key.into());
-    let rest = key
+    let sub = key
         .strip_prefix("conductor/")
         .and_then(|r| r.strip_prefix(domain))
         .and_then(|r| r.strip_prefix('/'))
         .ok_or_else(bad)?;
-    let (sub, state) = rest.split_once('/').ok_or_else(bad)?;
-    if conductor_bus::naming::validate("subsystem", sub).is_err()
-        || conductor_bus::naming::validate("state", state).is_err()
-    {
+    if conductor_bus::naming::validate("subsystem", sub).is_err() {
         return Err(bad());
     }
-    Ok((sub, state))
+    Ok(sub)
 }
 
 #[cfg(test)]
@@ -388,6 +494,9 @@ mod tests {
             seq: 3,
         };
         assert_eq!(Envelope::decode(&e.encode()), Ok(e.clone()));
+        let mut b = e.encode();
+        Envelope::set_seq(&mut b, 99);
+        assert_eq!(Envelope::decode(&b).map(|x| x.seq), Ok(99));
         assert_eq!(Envelope::decode(b"junk"), Err(Malformed::Envelope));
         let mut b = e.encode();
         b.push(0);
@@ -415,12 +524,66 @@ mod tests {
 
     #[test]
     fn keys_split_only_for_the_domain() {
+        assert_eq!(split_tick_key("robot", "conductor/robot/leg"), Ok("leg"));
+        assert!(split_tick_key("robot", "conductor/other/leg").is_err());
+        assert!(split_tick_key("robot", "conductor/robot/leg/knee").is_err());
+        assert!(split_tick_key("robot", "conductor/robot/@cmd").is_err());
+    }
+
+    #[test]
+    fn tick_message_roundtrip_keeps_every_abi_byte() {
+        let s = |tick: u64, value: f64| StateSample {
+            seq: tick,
+            tick,
+            t_sample_ns: 100 + tick,
+            t_publish_ns: 200 + tick,
+            value,
+            status: 0b10,
+            reserved: 0,
+        };
+        let entries = [(0, s(7, 1.5)), (3, s(7, -2.0)), (41, s(7, f64::NAN))];
+        let b = encode_tick(&entries);
+        assert_eq!(b.len(), TICK_HEADER_BYTES + 3 * TICK_ENTRY_BYTES);
+        // The sample's ABI bytes are carried unchanged.
+        let at = TICK_HEADER_BYTES + TICK_ENTRY_BYTES + 8;
+        assert_eq!(&b[at..at + SAMPLE_BYTES], &encode_sample(&entries[1].1));
+        let got: Vec<(u32, StateSample)> = decode_tick(&b).unwrap().collect();
+        assert_eq!(got.len(), 3);
+        assert_eq!((got[0].0, got[1].0, got[2].0), (0, 3, 41));
+        assert_eq!(got[1].1, entries[1].1);
+        assert!(got[2].1.value.is_nan());
+        // A reused buffer starts over.
+        let mut buf = b.clone();
+        begin_tick(&mut buf);
+        push_tick_entry(&mut buf, 9, &s(8, 0.0));
         assert_eq!(
-            split_state_key("robot", "conductor/robot/leg/knee"),
-            Ok(("leg", "knee"))
+            decode_tick(&buf).unwrap().collect::<Vec<_>>(),
+            vec![(9, s(8, 0.0))]
         );
-        assert!(split_state_key("robot", "conductor/other/leg/knee").is_err());
-        assert!(split_state_key("robot", "conductor/robot/leg").is_err());
-        assert!(split_state_key("robot", "conductor/robot/leg/commands").is_err());
+    }
+
+    #[test]
+    fn bad_tick_messages_are_refused_whole() {
+        let good = encode_tick(&[(1, StateSample::default()), (2, StateSample::default())]);
+        assert!(decode_tick(&good).is_ok());
+        assert!(decode_tick(&good[..good.len() - 1]).is_err());
+        assert!(decode_tick(b"short").is_err());
+        assert!(decode_tick(&encode_tick(&[])).is_err());
+        let mut lie = good.clone();
+        lie[0] = 3; // announces 3 entries, holds 2
+        assert!(matches!(
+            decode_tick(&lie),
+            Err(Malformed::Tick { count: 3, .. })
+        ));
+        let mut pad = good.clone();
+        pad[TICK_HEADER_BYTES + 5] = 1;
+        assert!(decode_tick(&pad).is_err());
+        // One foreign sample spoils the whole message.
+        let mut foreign = good;
+        foreign[TICK_HEADER_BYTES + TICK_ENTRY_BYTES + 8 + 42] = 0xff;
+        assert!(matches!(
+            decode_tick(&foreign),
+            Err(Malformed::Fields { .. })
+        ));
     }
 }

@@ -5,8 +5,9 @@
 //!
 //! 1. latency, one state at `--bridge-latency-hz`: publish in domain A → a subscriber of the
 //!    mirror in domain B (through both bridges), beside the same subscriber on A's local bus,
-//!    and beside raw Zenoh pub/sub of the same 48-byte payload plus envelope between the two
-//!    namespaces (helper processes `conductor __bridge-bench zpub|zsub`);
+//!    and beside raw Zenoh pub/sub of the same message between the two namespaces (helper
+//!    processes `conductor __bridge-bench zpub|zsub`): a one-entry tick message with its envelope,
+//!    put with the bridge's publisher settings (congestion drop, express), received in a callback;
 //! 2. load, `--bridge-states` states at `--bridge-rate` Hz for `--seconds`: CPU % of each bridge
 //!    process and the samples that never reached B (drops).
 //!
@@ -320,6 +321,11 @@ pub struct Report {
     pub published: u64,
     /// Received by B's subscribers.
     pub received: u64,
+    /// Ticks per second the load publisher reached.
+    pub publish_hz: f64,
+    /// Samples B saw marked STALE during the load run (each quiet-link episode marks every
+    /// mirror once).
+    pub stale_samples: u64,
 }
 
 impl Report {
@@ -332,8 +338,9 @@ impl Report {
              | local bus (iceoryx2) | {:.1} | {:.1} | {:.2}× | {:.2}× |\n\
              | raw Zenoh pub/sub | {:.1} | {:.1} | 1.00× | 1.00× |\n\
              | bridge (export → Zenoh → import) | {:.1} | {:.1} | {:.2}× | {:.2}× |\n\n\
-             Load: {} states at {} Hz for {} s: exporting bridge {:.1} % CPU, importing bridge \
-             {:.1} % CPU; {} of {} samples reached B ({} dropped, {:.3} %).\n",
+             Load: {} states at {} Hz for {} s (publisher reached {:.0} ticks/s): exporting bridge \
+             {:.1} % CPU, importing bridge {:.1} % CPU; {} of {} samples reached B ({} dropped, \
+             {:.3} %); {} samples marked STALE.\n",
             self.local_us.0,
             self.local_us.1,
             r(self.local_us.0, self.zenoh_us.0),
@@ -347,6 +354,7 @@ impl Report {
             self.load.0,
             self.load.1,
             self.load.2,
+            self.publish_hz,
             self.cpu_percent.0,
             self.cpu_percent.1,
             self.received,
@@ -354,6 +362,7 @@ impl Report {
             self.published.saturating_sub(self.received),
             100.0 * self.published.saturating_sub(self.received) as f64
                 / (self.published.max(1) as f64),
+            self.stale_samples,
             link = self.link,
         )
     }
@@ -491,11 +500,14 @@ pub fn run(o: &Options) -> Result<Report> {
     let (c0, c1) = (cpu_seconds(ex.pid()), cpu_seconds(im.pid()));
     let t0 = Instant::now();
     let mut received = 0u64;
+    let mut stale_samples = 0u64;
     let dur = Duration::from_secs_f64(o.seconds);
     while t0.elapsed() < dur {
         for s in &mut subs {
             while let Some(x) = s.receive()? {
-                if x.tick > first_tick && x.status & conductor_bus::status::STALE == 0 {
+                if x.status & conductor_bus::status::STALE != 0 {
+                    stale_samples += 1;
+                } else if x.tick > first_tick {
                     received += 1;
                 }
             }
@@ -509,6 +521,7 @@ pub fn run(o: &Options) -> Result<Report> {
     );
     stop.store(true, Ordering::Relaxed);
     let total_ticks = p.join().map_err(|_| err("publisher panicked"))??;
+    let publish_hz = (total_ticks - first_tick) as f64 / t0.elapsed().as_secs_f64();
     // Let the tail arrive, then count it.
     std::thread::sleep(Duration::from_millis(500));
     for s in &mut subs {
@@ -533,6 +546,8 @@ pub fn run(o: &Options) -> Result<Report> {
         cpu_percent: cpu,
         published,
         received,
+        publish_hz,
+        stale_samples,
     })
 }
 
@@ -558,7 +573,7 @@ pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
     };
     set(&mut cfg, "mode", "\"peer\"")?;
     set(&mut cfg, "scouting/multicast/enabled", "false")?;
-    let key = "conductor/bench/raw/s0";
+    let key = "conductor/bench/raw";
     let envelope = conductor_bridge::wire::Envelope {
         host: "bench-a".into(),
         session: 1,
@@ -573,7 +588,11 @@ pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
                 .declare_subscriber(key)
                 .callback(move |s| {
                     let now = monotonic_ns();
-                    if let Ok(x) = conductor_bridge::wire::decode_sample(&s.payload().to_bytes()) {
+                    let b = s.payload().to_bytes();
+                    if let Some((_, x)) = conductor_bridge::wire::decode_tick(&b)
+                        .ok()
+                        .and_then(|mut e| e.next())
+                    {
                         let _ = tx.send(now.saturating_sub(x.t_sample_ns));
                     }
                 })
@@ -603,9 +622,11 @@ pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
             set(&mut cfg, "connect/endpoints", &format!("[\"{endpoint}\"]"))?;
             let rate: f64 = get("--rate")?.parse().map_err(|_| err("--rate"))?;
             let z = zenoh::open(cfg).wait().map_err(|e| err(e.to_string()))?;
+            // The bridge's state publisher settings.
             let p = z
                 .declare_publisher(key)
                 .congestion_control(zenoh::qos::CongestionControl::Drop)
+                .express(true)
                 .wait()
                 .map_err(|e| err(e.to_string()))?;
             std::thread::sleep(Duration::from_millis(500));
@@ -625,7 +646,7 @@ pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
                     seq: i,
                     ..envelope.clone()
                 };
-                p.put(conductor_bridge::wire::encode_sample(&s).to_vec())
+                p.put(conductor_bridge::wire::encode_tick(&[(0, s)]))
                     .attachment(env.encode())
                     .wait()
                     .map_err(|e| err(e.to_string()))?;

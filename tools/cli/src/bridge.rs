@@ -93,5 +93,8 @@ pub fn run(domain: Option<&str>, args: &BridgeArgs) -> Result<()> {
     })
     .map_err(|e| CliError::Usage(e.to_string()))?;
     eprintln!("bridge stopped: {}", counters.summary());
+    if let Some(p) = conductor_bridge::profile::report() {
+        eprint!("{p}");
+    }
     Ok(())
 }

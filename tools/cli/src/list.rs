@@ -66,8 +66,9 @@ pub fn run(bus: &Bus, args: &ListArgs) -> Result<usize> {
         let m = &s.meta;
         let writer_names = p.as_ref().map(|p| p.writers(&names)).unwrap_or_default();
         // A mirror imported by `conductor bridge` is written by node `bridge@<owning host>`.
-        let host = conductor_bridge::owning_host(writer_names.iter().map(String::as_str))
-            .map_or_else(|| this_host.clone(), str::to_string);
+        let owner = conductor_bridge::owning_host(writer_names.iter().map(String::as_str));
+        let mirrored = owner.is_some();
+        let host = owner.map_or_else(|| this_host.clone(), str::to_string);
         let writers = Some(writer_names.join(","))
             .filter(|w| !w.is_empty())
             .unwrap_or_else(|| "-".into());
@@ -91,7 +92,14 @@ pub fn run(bus: &Bus, args: &ListArgs) -> Result<usize> {
             writers,
             latest.map_or("-".into(), |l| out::value(l.value)),
             latest.map_or("-".into(), |l| {
-                out::age(now.saturating_sub(l.t_sample_ns) as f64 * 1e-9)
+                // A mirror's t_sample_ns is on its owner's clock; its t_publish_ns is when it
+                // was received here: age on this machine's clock, never two clocks mixed.
+                let t = if mirrored {
+                    l.t_publish_ns
+                } else {
+                    l.t_sample_ns
+                };
+                out::age(now.saturating_sub(t) as f64 * 1e-9)
             }),
         ]);
     }
