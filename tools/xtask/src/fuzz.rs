@@ -31,6 +31,68 @@ pub const CRATES: &[&str] = &[
 /// test is safe Rust; ASan would halve the rate for little).
 const BUILD: &[&str] = &["--release", "--debug-assertions", "--sanitizer", "none"];
 
+/// The longest input each target is given (libFuzzer's `-max_len`), from what real input of
+/// that kind looks like; a target not listed gets libFuzzer's default (the largest seed, at
+/// least 4 KiB). The scanners hold a fixed window, so a few windows' worth of bytes reaches
+/// every state a longer stream does (the rest repeats them) at a fraction of the cost.
+pub const MAX_LEN: &[(&str, usize, &str)] = &[
+    (
+        "dxl2_scanner",
+        1024,
+        "4 windows of the 256-byte scanner: bursts of packets, resync over garbage, wrap",
+    ),
+    ("dxl1_scanner", 1200, "4 windows of the 300-byte scanner"),
+    (
+        "slcan_host_scanner",
+        512,
+        "17 SLCAN lines of the longest kind (30 bytes) through a 48-byte window",
+    ),
+    (
+        "slcan_device_scanner",
+        512,
+        "17 SLCAN command lines through a 40-byte window",
+    ),
+    (
+        "score_link_scanner",
+        1024,
+        "4 frames of the longest kind (254 bytes)",
+    ),
+    (
+        "score_link_decode",
+        300,
+        "one message (at most 250 bytes) and some over",
+    ),
+    (
+        "can_decode",
+        128,
+        "a CAN payload (8 bytes) or one SLCAN line (at most 30 bytes), with room for junk",
+    ),
+    (
+        "dxl1_decode",
+        300,
+        "one Dynamixel 1.0 packet (at most 259 bytes) and some over",
+    ),
+    (
+        "udp_request",
+        300,
+        "one datagram of the text protocol (at most 256 bytes) and some over",
+    ),
+    (
+        "parse_line",
+        2048,
+        "a script of lines up to the 160-byte line editor's length",
+    ),
+    ("terminal", 2048, "a terminal session up to 48 lines"),
+];
+
+/// `-max_len` for `target`, if it has one.
+fn max_len(target: &str) -> Option<usize> {
+    MAX_LEN
+        .iter()
+        .find(|(t, _, _)| *t == target)
+        .map(|&(_, n, _)| n)
+}
+
 struct Options {
     /// The arguments as given, for the report.
     args: Vec<String>,
@@ -237,6 +299,9 @@ fn campaign(dir: &Path, krate: &str, target: &str, o: &Options) -> Result<Outcom
         .arg("-rss_limit_mb=2048")
         .arg("-print_final_stats=1")
         .arg(format!("-artifact_prefix={}/", artifacts.display()));
+    if let Some(n) = max_len(target) {
+        c.arg(format!("-max_len={n}"));
+    }
     eprintln!("xtask: running {c:?}");
     let t = Instant::now();
     let out = c
@@ -320,6 +385,9 @@ fn update_seeds(dir: &Path, target: &str, corpus: &Path, seeds: &Path, regs: &Pa
         }
     }
     c.args(["--", "-merge=1", "-timeout=10", "-rss_limit_mb=2048"]);
+    if let Some(n) = max_len(target) {
+        c.arg(format!("-max_len={n}"));
+    }
     c.stdout(Stdio::null()).stderr(Stdio::null());
     run(&mut c)?;
     let _ = std::fs::remove_dir_all(seeds);
