@@ -224,7 +224,7 @@ pub fn decode_tick(b: &[u8]) -> Result<TickEntries<'_>, Malformed> {
     let body = &b[TICK_HEADER_BYTES..];
     if count == 0
         || u32_at(b, 4) != 0
-        || body.len() % TICK_ENTRY_BYTES != 0
+        || !body.len().is_multiple_of(TICK_ENTRY_BYTES)
         || body.len() / TICK_ENTRY_BYTES != count as usize
     {
         return Err(Malformed::Tick {
