@@ -128,6 +128,13 @@ impl ArmRig {
             bus,
         }
     }
+
+    /// Subscribes to the stats if that failed at open (the executor had published none yet).
+    fn subscribe_stats(&mut self) {
+        if self.stats.is_none() {
+            self.stats = StatsSubscriber::new(&self.bus, "arm").ok();
+        }
+    }
 }
 
 /// Real-time ticks 5 ms apart (the simulator answers on its own thread), each measured.
@@ -202,39 +209,30 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     let m = Manifest::parse(&text, "na.toml").unwrap_or_else(|e| panic!("{e}"));
     let sub = m.subsystems[0].clone();
 
-    let ArmRig {
-        _domain,
-        bus,
-        mut exec,
-        mut ctl,
-        mut p1,
-        mut stats,
-    } = ArmRig::open(&sub, "noalloc-edge");
+    let mut rig = ArmRig::open(&sub, "noalloc-edge");
 
     // Real time, 5 ms ticks: the simulator answers on its own thread.
     let mut ticks = RealTimeTicks::start();
     // Warm-up: the first bring-up, and a frame so every connection exists.
     for _ in 0..100 {
-        ticks.tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.2).unwrap();
-        ctl.add_ctrl("arm/e1", 1.0).unwrap();
-        ctl.send_ctrl().unwrap();
+        ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.2).unwrap();
+        rig.ctl.add_ctrl("arm/e1", 1.0).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    assert!(exec.stages().settled(), "brought up");
-    if stats.is_none() {
-        stats = StatsSubscriber::new(&bus, "arm").ok();
-    }
-    last_status(&mut p1);
+    assert!(rig.exec.stages().settled(), "brought up");
+    rig.subscribe_stats();
+    last_status(&mut rig.p1);
 
     let mut allocations = 0;
     // The port vanishes: reads and writes fail, the link hands the dead port to its helper.
     sim.unplug();
     for _ in 0..60 {
-        allocations += ticks.tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.3).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    let down = last_status(&mut p1);
+    let down = last_status(&mut rig.p1);
     assert!(
         down & conductor_bus::status::STALE != 0,
         "stale while down: {down:#x}"
@@ -242,21 +240,21 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     // Back: the link takes the reopened port, the servos are brought up again.
     sim.replug().unwrap();
     for _ in 0..150 {
-        allocations += ticks.tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.3).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    let up = last_status(&mut p1);
+    let up = last_status(&mut rig.p1);
     assert_eq!(up & conductor_bus::status::STALE, 0, "fresh again: {up:#x}");
     // Silence: the watchdog trips them; a setpoint is refused; enable.
     for _ in 0..40 {
-        allocations += ticks.tick(&mut exec);
+        allocations += ticks.tick(&mut rig.exec);
     }
-    ctl.add_ctrl("arm/p1", -0.3).unwrap();
-    ctl.send_ctrl().unwrap();
-    allocations += ticks.tick(&mut exec);
-    allocations += ticks.tick(&mut exec);
-    let tripped = last_status(&mut p1);
+    rig.ctl.add_ctrl("arm/p1", -0.3).unwrap();
+    rig.ctl.send_ctrl().unwrap();
+    allocations += ticks.tick(&mut rig.exec);
+    allocations += ticks.tick(&mut rig.exec);
+    let tripped = last_status(&mut rig.p1);
     assert!(
         tripped & conductor_bus::status::TRIPPED != 0,
         "{tripped:#x}"
@@ -265,15 +263,15 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
         tripped & conductor_bus::status::REJECTED != 0,
         "{tripped:#x}"
     );
-    ctl.add_ctrl("arm/e1", 1.0).unwrap();
-    ctl.send_ctrl().unwrap();
+    rig.ctl.add_ctrl("arm/e1", 1.0).unwrap();
+    rig.ctl.send_ctrl().unwrap();
     for _ in 0..60 {
-        allocations += ticks.tick(&mut exec);
-        ctl.add_ctrl("arm/e1", 1.0).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/e1", 1.0).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
     assert_eq!(
-        last_status(&mut p1) & conductor_bus::status::TRIPPED,
+        last_status(&mut rig.p1) & conductor_bus::status::TRIPPED,
         0,
         "enabled again"
     );
@@ -281,7 +279,7 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
         allocations, 0,
         "the hardware edge allocated on the real-time thread"
     );
-    let s = stats.unwrap().latest().unwrap().unwrap();
+    let s = rig.stats.unwrap().latest().unwrap().unwrap();
     assert_eq!(s.bus_outages, 1, "{s:?}");
     assert!(s.setpoints_refused >= 1, "{s:?}");
 }
@@ -349,27 +347,18 @@ fn a_udp_bus_refusing_every_send_allocates_nothing() {
     let m = Manifest::parse(&text, "na.toml").unwrap_or_else(|e| panic!("{e}"));
     let sub = m.subsystems[0].clone();
 
-    let ArmRig {
-        _domain,
-        bus,
-        mut exec,
-        mut ctl,
-        mut p1,
-        mut stats,
-    } = ArmRig::open(&sub, "noalloc-udp");
+    let mut rig = ArmRig::open(&sub, "noalloc-udp");
 
     let mut ticks = RealTimeTicks::start();
     // Warm-up: the servos answer over UDP and are brought up; every connection exists.
     for _ in 0..100 {
-        ticks.tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.2).unwrap();
-        ctl.send_ctrl().unwrap();
+        ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.2).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    assert!(exec.stages().settled(), "brought up over UDP");
-    if stats.is_none() {
-        stats = StatsSubscriber::new(&bus, "arm").ok();
-    }
-    let up = last_status(&mut p1);
+    assert!(rig.exec.stages().settled(), "brought up over UDP");
+    rig.subscribe_stats();
+    let up = last_status(&mut rig.p1);
     assert_eq!(
         up & conductor_bus::status::STALE,
         0,
@@ -377,9 +366,10 @@ fn a_udp_bus_refusing_every_send_allocates_nothing() {
     );
     // Let a stats publication through, to count errors from.
     for _ in 0..25 {
-        ticks.tick(&mut exec);
+        ticks.tick(&mut rig.exec);
     }
-    let errors_before = stats
+    let errors_before = rig
+        .stats
         .as_mut()
         .unwrap()
         .latest()
@@ -394,21 +384,21 @@ fn a_udp_bus_refusing_every_send_allocates_nothing() {
     assert_eq!(unsafe { libc::shutdown(fd, libc::SHUT_WR) }, 0);
     let mut allocations = 0;
     for _ in 0..200 {
-        allocations += ticks.tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.3).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
     assert_eq!(
         allocations, 0,
         "failing sends allocated on the real-time thread"
     );
     // The failures really happened, and were I/O errors, not a vanished bus.
-    let down = last_status(&mut p1);
+    let down = last_status(&mut rig.p1);
     assert!(
         down & conductor_bus::status::STALE != 0,
         "stale while no request goes out: {down:#x}"
     );
-    let s = stats.unwrap().latest().unwrap().unwrap();
+    let s = rig.stats.unwrap().latest().unwrap().unwrap();
     assert!(
         s.bus_errors >= errors_before + 150,
         "one failed send a tick: {} then {}",
