@@ -51,15 +51,10 @@ fn an_external_subscriber_sees_every_state_at_its_rate() {
         "sensors/b",
         "sensors/c",
     ];
-    let out = Command::new(STRESS)
-        .args(["log", "--domain", d.name(), "--seconds", "2", "--states"])
-        .arg(states.join(","))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = conductor_testkit::run_ok(
+        Command::new(STRESS)
+            .args(["log", "--domain", d.name(), "--seconds", "2", "--states"])
+            .arg(states.join(",")),
     );
     let bus = Bus::open(&d, "test").unwrap();
     let skipped = misses(&bus, "arm") + misses(&bus, "sensors");

@@ -33,6 +33,24 @@ struct Outbox {
     _service: PortFactory<RtIpc, CommandFrame, ()>,
 }
 
+impl Outbox {
+    /// Stamps the buffered frame with the next sequence number and the send time and publishes
+    /// it; returns how many receivers it reached.
+    fn send_frame(&mut self) -> Result<usize> {
+        self.seq += 1;
+        self.frame.seq = self.seq;
+        self.frame.t_send_ns = monotonic_ns();
+        let sample = self
+            .port
+            .loan_uninit()
+            .map_err(|e| BusError::iceoryx("loaning a command frame", e))?;
+        sample
+            .write_payload(self.frame)
+            .send()
+            .map_err(|e| BusError::iceoryx("sending a command frame", e))
+    }
+}
+
 /// Buffers setpoints and sends them as one [`CommandFrame`] per subsystem, which the owning
 /// executor applies in a single tick; reads states on demand.
 ///
@@ -160,17 +178,7 @@ impl Controller {
             if ob.frame.count == 0 {
                 continue;
             }
-            ob.seq += 1;
-            ob.frame.seq = ob.seq;
-            ob.frame.t_send_ns = monotonic_ns();
-            let sample = ob
-                .port
-                .loan_uninit()
-                .map_err(|e| BusError::iceoryx("loaning a command frame", e))?;
-            let receivers = sample
-                .write_payload(ob.frame)
-                .send()
-                .map_err(|e| BusError::iceoryx("sending a command frame", e))?;
+            let receivers = ob.send_frame()?;
             if receivers == 0 && undelivered.is_none() {
                 undelivered = Some(i);
             }
@@ -266,19 +274,9 @@ impl CommandSender {
     /// Sends the first `count` setpoints of `frame` as one frame.
     pub fn send(&mut self, frame: &CommandFrame) -> Result<()> {
         let ob = &mut self.outbox;
-        ob.seq += 1;
         ob.frame = *frame;
         ob.frame.count = ob.frame.count.min(MAX_SETPOINTS as u32);
-        ob.frame.seq = ob.seq;
-        ob.frame.t_send_ns = monotonic_ns();
-        let sample = ob
-            .port
-            .loan_uninit()
-            .map_err(|e| BusError::iceoryx("loaning a command frame", e))?;
-        sample
-            .write_payload(ob.frame)
-            .send()
-            .map_err(|e| BusError::iceoryx("sending a command frame", e))?;
+        ob.send_frame()?;
         Ok(())
     }
 }

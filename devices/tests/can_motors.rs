@@ -65,16 +65,7 @@ fn mit_devices(ids: &[u32]) -> Vec<Box<dyn Device>> {
 }
 
 fn mit_nodes(ids: &[u8]) -> Vec<Box<dyn CanNode>> {
-    ids.iter()
-        .map(|&id| {
-            Box::new(MitMotorSim::new(
-                id,
-                mit_limits("ak80-9").unwrap(),
-                0,
-                false,
-            )) as Box<dyn CanNode>
-        })
-        .collect()
+    MitMotorSim::bus(ids.iter().copied(), mit_limits("ak80-9").unwrap())
 }
 
 /// Each motor gets exactly one frame per tick however many of its channels were written, and

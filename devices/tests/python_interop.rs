@@ -2,7 +2,7 @@
 //! our Dynamixel simulator, and `python-can`'s `slcan` interface drives our SLCAN adapter
 //! simulator, each over a pseudo-terminal, exactly as they would a U2D2 or a CANable.
 
-use conductor_testkit::python;
+use conductor_testkit::{python, run_ok};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -21,17 +21,7 @@ fn run_script(script: &str, args: &[&str]) -> String {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/python")
         .join(script);
-    let out = Command::new(python())
-        .arg(path)
-        .args(args)
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "{script} failed:\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_ok(Command::new(python()).arg(path).args(args));
     String::from_utf8(out.stdout).unwrap()
 }
 

@@ -3,7 +3,7 @@
 //! are fed and polled with explicit times.
 
 use conductor_devices::protocol_stage::mit_limits;
-use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
+use conductor_devices::sim::can_motors::{MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_protocols::slcan::Dialect;
 
@@ -12,11 +12,7 @@ const MS: u64 = 1_000_000;
 /// MIT motors 1 and 2 (6-byte replies) and, with `odrive`, ODrive node 4 with a 10 ms
 /// heartbeat.
 fn adapter(dialect: Dialect, odrive: bool) -> SlcanAdapterSim {
-    let l = mit_limits("ak80-9").unwrap();
-    let mut nodes: Vec<Box<dyn CanNode>> = vec![
-        Box::new(MitMotorSim::new(1, l, 0, false)),
-        Box::new(MitMotorSim::new(2, l, 0, false)),
-    ];
+    let mut nodes = MitMotorSim::bus([1, 2], mit_limits("ak80-9").unwrap());
     if odrive {
         nodes.push(Box::new(OdriveAxisSim::new(4, 10, 0)));
     }

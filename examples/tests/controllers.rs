@@ -27,12 +27,7 @@ fn position(d: &Domain) -> f64 {
 }
 
 fn run_json(cmd: &mut Command) -> serde_json::Value {
-    let out = cmd.output().expect("start the example");
-    assert!(
-        out.status.success(),
-        "{cmd:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = conductor_testkit::run_ok(cmd);
     serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
         panic!("{e}: {}", String::from_utf8_lossy(&out.stdout));
     })

@@ -12,16 +12,13 @@ fn the_leg_tracks_the_gait_and_the_pid_beats_the_open_loop_as_predicted() {
     let d = Domain::unique("demo").unwrap();
     // 6 s of tracking: 3 s per phase, of which the last 2 s (one whole gait cycle, so the RMS
     // of each joint's sinusoidal error is exact) are measured.
-    let out = Command::new(env!("CARGO_BIN_EXE_conductor-demo"))
-        .args(["--seconds", "6", "--domain", d.name()])
-        .output()
-        .unwrap();
+    let out = conductor_testkit::run_ok(Command::new(env!("CARGO_BIN_EXE_conductor-demo")).args([
+        "--seconds",
+        "6",
+        "--domain",
+        d.name(),
+    ]));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
     let summary = stdout
         .lines()
         .find(|l| l.starts_with("summary:"))

@@ -318,16 +318,7 @@ fn quadruped(iface: &str, extra: &str) -> PathBuf {
 }
 
 fn mit_nodes(ids: &[u8]) -> Vec<Box<dyn CanNode>> {
-    ids.iter()
-        .map(|&id| {
-            Box::new(MitMotorSim::new(
-                id,
-                mit_limits("ak80-9").unwrap(),
-                0,
-                false,
-            )) as Box<dyn CanNode>
-        })
-        .collect()
+    MitMotorSim::bus(ids.iter().copied(), mit_limits("ak80-9").unwrap())
 }
 
 const ENTER: [u8; 8] = [0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFC];

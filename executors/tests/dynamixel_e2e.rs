@@ -223,18 +223,13 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
     // An independent witness: ROBOTIS' DynamixelSDK opens the same port after the executor
     // exited and reads what each servo holds: torque on, no error, its goal where it is.
     let script = conductor_testkit::workspace().join("devices/tests/python/dxl_sdk_state.py");
-    let out = std::process::Command::new(conductor_testkit::python())
-        .arg(&script)
-        .arg(&port)
-        .arg("1,2,3,4,5,6")
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{text}{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = conductor_testkit::run_ok(
+        std::process::Command::new(conductor_testkit::python())
+            .arg(&script)
+            .arg(&port)
+            .arg("1,2,3,4,5,6"),
     );
+    let text = String::from_utf8_lossy(&out.stdout);
     let rows: Vec<Vec<i64>> = text
         .lines()
         .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())

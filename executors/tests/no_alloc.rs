@@ -8,6 +8,7 @@ use conductor_executor::executor::Executor;
 use conductor_executor::schedule::Wake;
 use conductor_manifest::Manifest;
 use conductor_testkit::alloc::{measure as measured, Counting};
+use std::time::Duration;
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -102,12 +103,85 @@ fn ten_thousand_ticks_allocate_nothing() {
 /// are); then setpoints, a watchdog trip, refused setpoints and an enable. Every tick of it
 /// under the counting allocator, after the warm-up (the first bring-up and the bus's lazy
 /// connections).
+/// An executor for the `arm` subsystem on a private domain, with a controller, a subscriber to
+/// `arm/p1` and (once the executor publishes them) its stats.
+struct ArmRig {
+    _domain: support::DomainGuard,
+    bus: Bus,
+    exec: Executor,
+    ctl: Controller,
+    p1: StateSubscriber,
+    stats: Option<StatsSubscriber>,
+}
+
+impl ArmRig {
+    fn open(sub: &conductor_manifest::Subsystem, tag: &str) -> Self {
+        prepare_thread();
+        let (domain, guard) = support::private_domain(tag);
+        let bus = Bus::open(&domain, "executor/arm").unwrap();
+        Self {
+            _domain: guard,
+            exec: Executor::new(&bus, sub).unwrap(),
+            ctl: Controller::new(&bus),
+            p1: StateSubscriber::with_buffer(&bus, "arm/p1", 64).unwrap(),
+            stats: StatsSubscriber::new(&bus, "arm").ok(),
+            bus,
+        }
+    }
+
+    /// Subscribes to the stats if that failed at open (the executor had published none yet).
+    fn subscribe_stats(&mut self) {
+        if self.stats.is_none() {
+            self.stats = StatsSubscriber::new(&self.bus, "arm").ok();
+        }
+    }
+}
+
+/// Real-time ticks 5 ms apart (the simulator answers on its own thread), each measured.
+struct RealTimeTicks {
+    t0: u64,
+    k: u64,
+}
+
+impl RealTimeTicks {
+    fn start() -> Self {
+        Self {
+            t0: conductor_bus::monotonic_ns(),
+            k: 0,
+        }
+    }
+
+    /// Sleeps until the next tick is due, runs it and returns what it allocated.
+    fn tick(&mut self, exec: &mut Executor) -> u64 {
+        let due = self.t0 + self.k * 5_000_000;
+        let now = conductor_bus::monotonic_ns();
+        if due > now {
+            std::thread::sleep(Duration::from_nanos(due - now));
+        }
+        let now = conductor_bus::monotonic_ns();
+        let wake = Wake {
+            slot: self.k,
+            sched_ns: now,
+            late_ns: 0,
+            skipped: 0,
+        };
+        self.k += 1;
+        measured(|| exec.tick(&wake, now)).1
+    }
+}
+
+/// The status flags of the newest sample `sub` holds (0 when it holds none).
+fn last_status(sub: &mut StateSubscriber) -> u32 {
+    let mut last = 0;
+    sub.drain(|s| last = s.status).unwrap();
+    last
+}
+
 #[test]
 fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     use conductor_devices::sim::dxl::DxlSimConfig;
     use conductor_devices::sim::fault::FaultConfig;
     use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty};
-    use std::time::Duration;
 
     let link = std::env::temp_dir().join(format!("conductor-noalloc-{}", std::process::id()));
     let sim = run_dxl(
@@ -135,60 +209,30 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     let m = Manifest::parse(&text, "na.toml").unwrap_or_else(|e| panic!("{e}"));
     let sub = m.subsystems[0].clone();
 
-    prepare_thread();
-    let (domain, _guard) = support::private_domain("noalloc-edge");
-    let bus = Bus::open(&domain, "executor/arm").unwrap();
-    let mut exec = Executor::new(&bus, &sub).unwrap();
-    let mut ctl = Controller::new(&bus);
-    let mut p1 = StateSubscriber::with_buffer(&bus, "arm/p1", 64).unwrap();
-    let mut stats = StatsSubscriber::new(&bus, "arm").ok();
+    let mut rig = ArmRig::open(&sub, "noalloc-edge");
 
     // Real time, 5 ms ticks: the simulator answers on its own thread.
-    let t0 = conductor_bus::monotonic_ns();
-    let mut k = 0u64;
-    let mut tick = |exec: &mut Executor| {
-        let due = t0 + k * 5_000_000;
-        let now = conductor_bus::monotonic_ns();
-        if due > now {
-            std::thread::sleep(Duration::from_nanos(due - now));
-        }
-        let now = conductor_bus::monotonic_ns();
-        let wake = Wake {
-            slot: k,
-            sched_ns: now,
-            late_ns: 0,
-            skipped: 0,
-        };
-        k += 1;
-        measured(|| exec.tick(&wake, now)).1
-    };
-    let flags = |sub: &mut StateSubscriber| {
-        let mut last = 0;
-        sub.drain(|s| last = s.status).unwrap();
-        last
-    };
+    let mut ticks = RealTimeTicks::start();
     // Warm-up: the first bring-up, and a frame so every connection exists.
     for _ in 0..100 {
-        tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.2).unwrap();
-        ctl.add_ctrl("arm/e1", 1.0).unwrap();
-        ctl.send_ctrl().unwrap();
+        ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.2).unwrap();
+        rig.ctl.add_ctrl("arm/e1", 1.0).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    assert!(exec.stages().settled(), "brought up");
-    if stats.is_none() {
-        stats = StatsSubscriber::new(&bus, "arm").ok();
-    }
-    flags(&mut p1);
+    assert!(rig.exec.stages().settled(), "brought up");
+    rig.subscribe_stats();
+    last_status(&mut rig.p1);
 
     let mut allocations = 0;
     // The port vanishes: reads and writes fail, the link hands the dead port to its helper.
     sim.unplug();
     for _ in 0..60 {
-        allocations += tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.3).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    let down = flags(&mut p1);
+    let down = last_status(&mut rig.p1);
     assert!(
         down & conductor_bus::status::STALE != 0,
         "stale while down: {down:#x}"
@@ -196,21 +240,21 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     // Back: the link takes the reopened port, the servos are brought up again.
     sim.replug().unwrap();
     for _ in 0..150 {
-        allocations += tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.3).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    let up = flags(&mut p1);
+    let up = last_status(&mut rig.p1);
     assert_eq!(up & conductor_bus::status::STALE, 0, "fresh again: {up:#x}");
     // Silence: the watchdog trips them; a setpoint is refused; enable.
     for _ in 0..40 {
-        allocations += tick(&mut exec);
+        allocations += ticks.tick(&mut rig.exec);
     }
-    ctl.add_ctrl("arm/p1", -0.3).unwrap();
-    ctl.send_ctrl().unwrap();
-    allocations += tick(&mut exec);
-    allocations += tick(&mut exec);
-    let tripped = flags(&mut p1);
+    rig.ctl.add_ctrl("arm/p1", -0.3).unwrap();
+    rig.ctl.send_ctrl().unwrap();
+    allocations += ticks.tick(&mut rig.exec);
+    allocations += ticks.tick(&mut rig.exec);
+    let tripped = last_status(&mut rig.p1);
     assert!(
         tripped & conductor_bus::status::TRIPPED != 0,
         "{tripped:#x}"
@@ -219,15 +263,15 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
         tripped & conductor_bus::status::REJECTED != 0,
         "{tripped:#x}"
     );
-    ctl.add_ctrl("arm/e1", 1.0).unwrap();
-    ctl.send_ctrl().unwrap();
+    rig.ctl.add_ctrl("arm/e1", 1.0).unwrap();
+    rig.ctl.send_ctrl().unwrap();
     for _ in 0..60 {
-        allocations += tick(&mut exec);
-        ctl.add_ctrl("arm/e1", 1.0).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/e1", 1.0).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
     assert_eq!(
-        flags(&mut p1) & conductor_bus::status::TRIPPED,
+        last_status(&mut rig.p1) & conductor_bus::status::TRIPPED,
         0,
         "enabled again"
     );
@@ -235,7 +279,7 @@ fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
         allocations, 0,
         "the hardware edge allocated on the real-time thread"
     );
-    let s = stats.unwrap().latest().unwrap().unwrap();
+    let s = rig.stats.unwrap().latest().unwrap().unwrap();
     assert_eq!(s.bus_outages, 1, "{s:?}");
     assert!(s.setpoints_refused >= 1, "{s:?}");
 }
@@ -278,7 +322,6 @@ fn a_udp_bus_refusing_every_send_allocates_nothing() {
     use conductor_devices::sim::dxl::DxlSimConfig;
     use conductor_devices::sim::fault::FaultConfig;
     use conductor_devices::sim::runner::{run_dxl, Endpoint};
-    use std::time::Duration;
 
     let sim = run_dxl(
         Endpoint::udp("127.0.0.1:0".parse().unwrap()).unwrap(),
@@ -304,48 +347,18 @@ fn a_udp_bus_refusing_every_send_allocates_nothing() {
     let m = Manifest::parse(&text, "na.toml").unwrap_or_else(|e| panic!("{e}"));
     let sub = m.subsystems[0].clone();
 
-    prepare_thread();
-    let (domain, _guard) = support::private_domain("noalloc-udp");
-    let bus = Bus::open(&domain, "executor/arm").unwrap();
-    let mut exec = Executor::new(&bus, &sub).unwrap();
-    let mut ctl = Controller::new(&bus);
-    let mut p1 = StateSubscriber::with_buffer(&bus, "arm/p1", 64).unwrap();
-    let mut stats = StatsSubscriber::new(&bus, "arm").ok();
+    let mut rig = ArmRig::open(&sub, "noalloc-udp");
 
-    let t0 = conductor_bus::monotonic_ns();
-    let mut k = 0u64;
-    let mut tick = |exec: &mut Executor| {
-        let due = t0 + k * 5_000_000;
-        let now = conductor_bus::monotonic_ns();
-        if due > now {
-            std::thread::sleep(Duration::from_nanos(due - now));
-        }
-        let now = conductor_bus::monotonic_ns();
-        let wake = Wake {
-            slot: k,
-            sched_ns: now,
-            late_ns: 0,
-            skipped: 0,
-        };
-        k += 1;
-        measured(|| exec.tick(&wake, now)).1
-    };
-    let flags = |sub: &mut StateSubscriber| {
-        let mut last = 0;
-        sub.drain(|s| last = s.status).unwrap();
-        last
-    };
+    let mut ticks = RealTimeTicks::start();
     // Warm-up: the servos answer over UDP and are brought up; every connection exists.
     for _ in 0..100 {
-        tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.2).unwrap();
-        ctl.send_ctrl().unwrap();
+        ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.2).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
-    assert!(exec.stages().settled(), "brought up over UDP");
-    if stats.is_none() {
-        stats = StatsSubscriber::new(&bus, "arm").ok();
-    }
-    let up = flags(&mut p1);
+    assert!(rig.exec.stages().settled(), "brought up over UDP");
+    rig.subscribe_stats();
+    let up = last_status(&mut rig.p1);
     assert_eq!(
         up & conductor_bus::status::STALE,
         0,
@@ -353,9 +366,10 @@ fn a_udp_bus_refusing_every_send_allocates_nothing() {
     );
     // Let a stats publication through, to count errors from.
     for _ in 0..25 {
-        tick(&mut exec);
+        ticks.tick(&mut rig.exec);
     }
-    let errors_before = stats
+    let errors_before = rig
+        .stats
         .as_mut()
         .unwrap()
         .latest()
@@ -370,21 +384,21 @@ fn a_udp_bus_refusing_every_send_allocates_nothing() {
     assert_eq!(unsafe { libc::shutdown(fd, libc::SHUT_WR) }, 0);
     let mut allocations = 0;
     for _ in 0..200 {
-        allocations += tick(&mut exec);
-        ctl.add_ctrl("arm/p1", 0.3).unwrap();
-        ctl.send_ctrl().unwrap();
+        allocations += ticks.tick(&mut rig.exec);
+        rig.ctl.add_ctrl("arm/p1", 0.3).unwrap();
+        rig.ctl.send_ctrl().unwrap();
     }
     assert_eq!(
         allocations, 0,
         "failing sends allocated on the real-time thread"
     );
     // The failures really happened, and were I/O errors, not a vanished bus.
-    let down = flags(&mut p1);
+    let down = last_status(&mut rig.p1);
     assert!(
         down & conductor_bus::status::STALE != 0,
         "stale while no request goes out: {down:#x}"
     );
-    let s = stats.unwrap().latest().unwrap().unwrap();
+    let s = rig.stats.unwrap().latest().unwrap().unwrap();
     assert!(
         s.bus_errors >= errors_before + 150,
         "one failed send a tick: {} then {}",

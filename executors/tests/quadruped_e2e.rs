@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use conductor_bus::{Bus, Controller, Domain, StateSubscriber};
 use conductor_devices::protocol_stage::mit_limits;
-use conductor_devices::sim::can_motors::{CanNode, MitMotorSim};
+use conductor_devices::sim::can_motors::MitMotorSim;
 use conductor_devices::sim::runner::{run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_protocols::slcan::Dialect;
@@ -44,16 +44,7 @@ impl Drop for Exec {
 fn quadruped_leg_on_the_slcan_simulator() {
     let pty = Pty::open(None).unwrap();
     let port = pty.path().to_string();
-    let nodes: Vec<Box<dyn CanNode>> = (1..=3)
-        .map(|id| {
-            Box::new(MitMotorSim::new(
-                id,
-                mit_limits("ak80-9").unwrap(),
-                0,
-                false,
-            )) as Box<dyn CanNode>
-        })
-        .collect();
+    let nodes = MitMotorSim::bus(1..=3, mit_limits("ak80-9").unwrap());
     let sim = run_slcan(
         Endpoint::Pty(pty),
         SlcanAdapterSim::new(Dialect::CANABLE, nodes),

@@ -207,17 +207,7 @@ fn serve_socketcan(sim: SocketCanSim) {
             continue;
         };
         let on_node = |id: &str, f: &dyn Fn(&mut dyn CanNode) -> bool| {
-            let id: u8 = number(id)?;
-            let mut nodes = sim.nodes();
-            let n = nodes
-                .iter_mut()
-                .find(|n| n.snapshot().id == id)
-                .ok_or(format!("no node {id}"))?;
-            if f(n.as_mut()) {
-                Ok(())
-            } else {
-                Err(format!("node {id} does not take that fault"))
-            }
+            fault_node(&mut sim.nodes(), number(id)?, f)
         };
         let result = match cmd {
             "stats" => {
@@ -358,18 +348,27 @@ fn dxl_control(r: &Running<DxlBusSim>, cmd: &str, a: &[&str]) -> Result<(), Stri
     }
 }
 
+/// Applies `f` (a fault or its clearing) to node `id`; an error names a missing node or one
+/// that does not take the fault.
+fn fault_node(
+    nodes: &mut [Box<dyn CanNode>],
+    id: u8,
+    f: &dyn Fn(&mut dyn CanNode) -> bool,
+) -> Result<(), String> {
+    let n = nodes
+        .iter_mut()
+        .find(|n| n.snapshot().id == id)
+        .ok_or(format!("no node {id}"))?;
+    if f(n.as_mut()) {
+        Ok(())
+    } else {
+        Err(format!("node {id} does not take that fault"))
+    }
+}
+
 fn slcan_control(r: &Running<SlcanAdapterSim>, cmd: &str, a: &[&str]) -> Result<(), String> {
     let node = |sim: &mut SlcanAdapterSim, id: u8, f: &dyn Fn(&mut dyn CanNode) -> bool| {
-        let n = sim
-            .nodes_mut()
-            .iter_mut()
-            .find(|n| n.snapshot().id == id)
-            .ok_or(format!("no node {id}"))?;
-        if f(n.as_mut()) {
-            Ok(())
-        } else {
-            Err(format!("node {id} does not take that fault"))
-        }
+        fault_node(sim.nodes_mut(), id, f)
     };
     match cmd {
         "fault" => {

@@ -130,6 +130,14 @@ impl MitMotorSim {
         }
     }
 
+    /// Motors `ids` of one model, each replying to master 0 with the 6-byte reply: the
+    /// simulated MIT bus that tests and the `can_sim` hardware put behind an adapter.
+    pub fn bus(ids: impl IntoIterator<Item = u8>, limits: Limits) -> Vec<Box<dyn CanNode>> {
+        ids.into_iter()
+            .map(|id| Box::new(Self::new(id, limits, 0, false)) as Box<dyn CanNode>)
+            .collect()
+    }
+
     /// Control commands ignored because motor mode was off (before Enter, after Exit, while
     /// faulted).
     pub fn ignored(&self) -> u64 {

@@ -436,12 +436,7 @@ pub const CAN_SIM: KindSpec = KindSpec {
 
 fn open_can_sim(p: &Params, _: Capacity) -> Result<OpenedHardware<CanFrame>, BuildError> {
     let limits = crate::protocol_stage::mit_model(p, "model")?;
-    let mut nodes: Vec<Box<dyn CanNode>> = Vec::new();
-    for id in id_list(p, "mit")? {
-        nodes.push(Box::new(super::can_motors::MitMotorSim::new(
-            id, limits, 0, false,
-        )));
-    }
+    let mut nodes = super::can_motors::MitMotorSim::bus(id_list(p, "mit")?, limits);
     let heartbeat_ms = p.int_as("heartbeat_ms")?;
     for n in id_list(p, "odrive")? {
         nodes.push(Box::new(super::can_motors::OdriveAxisSim::new(

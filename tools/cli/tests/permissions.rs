@@ -35,13 +35,7 @@ fn as_root(program: &str) -> Command {
 }
 
 fn run_ok(mut c: Command) -> String {
-    let out = c.output().expect("run");
-    assert!(
-        out.status.success(),
-        "{c:?}: {}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = conductor_testkit::run_ok(&mut c);
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 

@@ -192,22 +192,17 @@ fn python_udp_client_closes_a_loop_on_the_motor() {
     let base = free_udp_ports(3);
     let mut gw = gateway(&d, "motor/*", base);
     gw.until(Duration::from_secs(10), |l| l == "READY");
-    let out = Command::new(python())
-        .arg(workspace().join("examples/python/udp_client.py"))
-        .args([
-            "--base-port",
-            &base.to_string(),
-            "--target",
-            "1.0",
-            "--seconds",
-            "3",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = conductor_testkit::run_ok(
+        Command::new(python())
+            .arg(workspace().join("examples/python/udp_client.py"))
+            .args([
+                "--base-port",
+                &base.to_string(),
+                "--target",
+                "1.0",
+                "--seconds",
+                "3",
+            ]),
     );
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(report["steps"].as_u64().unwrap() > 50, "{report}");

@@ -12,8 +12,10 @@
 //!   that need a real Linux CAN stack (vcan, slcan) the build machine's kernel lacks.
 //! * [`fuzz`] — the fuzz targets' seed and regression corpora replayed as an ordinary test.
 //! * [`eventually`] — polling for what another process or thread will make true.
+//! * [`run_ok`] — running a program that must succeed, with its output in the failure message.
 
 use std::path::PathBuf;
+use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 pub mod alloc;
@@ -53,4 +55,20 @@ pub fn eventually<T>(timeout: Duration, what: &str, mut f: impl FnMut() -> Optio
         assert!(Instant::now() < end, "{what}: not within {timeout:?}");
         std::thread::sleep(Duration::from_millis(10));
     }
+}
+
+/// Runs `cmd` to completion and returns its output; panics with the command, its stdout and its
+/// stderr when it fails (or cannot start).
+pub fn run_ok(cmd: &mut Command) -> Output {
+    let out = cmd
+        .output()
+        .unwrap_or_else(|e| panic!("{cmd:?} did not start: {e}"));
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed ({}):\n{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
 }

@@ -24,14 +24,7 @@ pub fn conductor(d: &Domain) -> Command {
 
 /// Runs to completion; panics with stderr when it fails.
 pub fn ok(cmd: &mut Command) -> String {
-    let out = cmd.output().expect("run conductor");
-    assert!(
-        out.status.success(),
-        "{cmd:?} failed: {}\n{}",
-        String::from_utf8_lossy(&out.stderr),
-        String::from_utf8_lossy(&out.stdout)
-    );
-    String::from_utf8(out.stdout).unwrap()
+    String::from_utf8(conductor_testkit::run_ok(cmd).stdout).unwrap()
 }
 
 /// Runs to completion and expects failure; returns stderr.
@@ -205,15 +198,10 @@ pub fn free_udp_ports(n: u16) -> u16 {
 
 /// Runs tests/python/check_mcap.py (official `mcap` reader + `jsonschema`) on a recording.
 pub fn check_with_python(file: &Path) -> Value {
-    let out = Command::new(python())
-        .arg(workspace().join("tools/cli/tests/python/check_mcap.py"))
-        .arg(file)
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "check_mcap.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = conductor_testkit::run_ok(
+        Command::new(python())
+            .arg(workspace().join("tools/cli/tests/python/check_mcap.py"))
+            .arg(file),
     );
     serde_json::from_slice(&out.stdout).unwrap()
 }
