@@ -94,20 +94,7 @@ pub fn run(args: &ControllerArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     let raw = RawSender::open(&domain, sub)?;
     let indices: Vec<u32> = watch.iter().map(|w| w.info().meta.index).collect();
-    let flood_until = Arc::new(AtomicU64::new(0));
-    let f2 = flood_until.clone();
-    std::thread::spawn(move || {
-        for line in std::io::stdin().lock().lines().map_while(Result::ok) {
-            if let Some(ms) = line
-                .strip_prefix("flood ")
-                .and_then(|m| m.trim().parse::<u64>().ok())
-            {
-                f2.store(monotonic_ns() + ms * 1_000_000, Ordering::Relaxed);
-            }
-        }
-        // The soak went away: so does its controller.
-        std::process::exit(0);
-    });
+    let flood_until = flood_requests();
     let mut rng = Rng::new(args.seed);
     let period = Duration::from_secs_f64(1.0 / args.rate_hz);
     let t0 = Instant::now();
@@ -208,4 +195,24 @@ fn say(text: &str) {
     let mut out = std::io::stdout().lock();
     let _ = writeln!(out, "{text}");
     let _ = out.flush();
+}
+
+/// Reads the campaign's `flood <ms>` lines on stdin: the returned time (monotonic ns) is when
+/// the flood asked for ends. When the campaign goes away (stdin closes), the controller exits.
+pub(super) fn flood_requests() -> Arc<AtomicU64> {
+    let flood_until = Arc::new(AtomicU64::new(0));
+    let f2 = flood_until.clone();
+    std::thread::spawn(move || {
+        for line in std::io::stdin().lock().lines().map_while(Result::ok) {
+            if let Some(ms) = line
+                .strip_prefix("flood ")
+                .and_then(|m| m.trim().parse::<u64>().ok())
+            {
+                f2.store(monotonic_ns() + ms * 1_000_000, Ordering::Relaxed);
+            }
+        }
+        // The soak went away: so does its controller.
+        std::process::exit(0);
+    });
+    flood_until
 }

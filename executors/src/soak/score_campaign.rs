@@ -20,7 +20,7 @@ use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader, Write};
 use std::path::PathBuf;
 use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, Receiver};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -368,19 +368,7 @@ pub fn run_controller(args: &ControllerArgs) -> Result<(), Box<dyn std::error::E
         }
     }
     let raw = RawSender::open(&domain, SUBSYSTEM)?;
-    let flood_until = Arc::new(AtomicU64::new(0));
-    let f2 = flood_until.clone();
-    std::thread::spawn(move || {
-        for line in std::io::stdin().lock().lines().map_while(Result::ok) {
-            if let Some(ms) = line
-                .strip_prefix("flood ")
-                .and_then(|m| m.trim().parse::<u64>().ok())
-            {
-                f2.store(monotonic_ns() + ms * 1_000_000, Ordering::Relaxed);
-            }
-        }
-        std::process::exit(0);
-    });
+    let flood_until = super::controller::flood_requests();
     let mut rng = Rng::new(args.seed);
     let period = Duration::from_secs_f64(1.0 / args.rate_hz);
     let t0 = Instant::now();
