@@ -519,3 +519,67 @@ fn bring_up_survives_a_noisy_bus() {
         }
     }
 }
+
+/// A stop that comes while the watchdog's holds are still on the wire (the controller died
+/// just before the robot was stopped) confirms every servo's safe state on a noisy bus. A hold
+/// whose write the line damaged is read back unchanged and sent again; that second round used
+/// to keep the first round's read-back, so its answers were never taken and the stop could not
+/// confirm (the soak's intermittent exit status 4).
+#[test]
+fn a_stop_during_a_watchdog_trip_confirms_every_hold() {
+    let link = std::env::temp_dir().join(format!("conductor-edge-stoptrip-{}", std::process::id()));
+    let noise = |seed| FaultConfig {
+        corrupt: 0.005,
+        drop: 0.005,
+        seed,
+        ..FaultConfig::default()
+    };
+    for (seed, after_ms) in [(1u64, 0u64), (2, 2), (3, 5), (4, 8), (5, 12), (6, 20)] {
+        let sim = run_dxl(
+            Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
+            ids(6),
+            noise(seed),
+            noise(seed ^ 0x5EED),
+        );
+        sim.sim().start_log();
+        let (mut exec, d) = running(
+            "stoptrip",
+            &manifest(&link.display().to_string(), 6, "watchdog_ms = 100", ""),
+        );
+        let bus = Bus::open(&d, "t").unwrap();
+        let mut ctl = Controller::new(&bus);
+        for k in 0..10 {
+            let v = 0.1 * (k % 3) as f64;
+            let sp: Vec<(String, f64)> = (1..=6).map(|i| (format!("arm/p{i}"), v)).collect();
+            let sp: Vec<(&str, f64)> = sp.iter().map(|(n, v)| (n.as_str(), *v)).collect();
+            send(&mut ctl, &sp);
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        exec.wait_log(3, "tripped by the command watchdog");
+        std::thread::sleep(Duration::from_millis(after_ms));
+        let status = exec.stop();
+        if !status.success() {
+            let s = sim.sim();
+            let log: Vec<_> = s
+                .instruction_log()
+                .iter()
+                .rev()
+                .take(80)
+                .map(|r| {
+                    format!(
+                        "{:.1}ms id{} i{:#x} a{} {:?}",
+                        r.0 as f64 / 1e6,
+                        r.1,
+                        r.2,
+                        r.3,
+                        r.4
+                    )
+                })
+                .collect();
+            panic!(
+                "seed {seed}, stop {after_ms} ms after the trip: {status}: {:#?}\nlast instructions (newest first): {log:#?}",
+                exec.log()
+            );
+        }
+    }
+}

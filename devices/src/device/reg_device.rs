@@ -409,6 +409,9 @@ impl<T: ControlTable> RegDevice<T> {
             // `HOLD_FRESH_NS`, then the hold).
             Step::Safe | Step::SafeAlign => {
                 for k in 0..self.life.n_expect {
+                    // A new round: what the last one read (a goal the lost write never
+                    // changed) is no answer to this one.
+                    self.life.expect[k].got = None;
                     let e = self.life.expect[k];
                     if let Some(v) = e.want {
                         self.push_write(e.addr, e.len, v, ctx, out);
