@@ -128,6 +128,22 @@ pub(crate) fn read_nb(fd: RawFd, out: &mut [u8]) -> Result<usize, HwError> {
     }
 }
 
+/// Bytes the line discipline holds ready to read (`FIONREAD`), without waiting.
+///
+/// A `read(2)` or `poll(2)` on a tty that finds nothing ready first waits for the kernel's
+/// pending receive work (`flush_to_ldisc`, run by a normal-priority kworker) to finish,
+/// `O_NONBLOCK` or not: a real-time thread calling it would block for as long as that
+/// kworker is kept off the CPU (hundreds of milliseconds on a busy machine). `FIONREAD`
+/// only counts what has arrived, so reading only what it reports never waits.
+pub(crate) fn pending(fd: RawFd) -> Result<usize, HwError> {
+    let mut n: libc::c_int = 0;
+    // SAFETY: FIONREAD writes one c_int to the pointer, which points to one.
+    if unsafe { libc::ioctl(fd, libc::FIONREAD, &mut n) } < 0 {
+        return Err(hw_error(Errno::last()));
+    }
+    Ok(n.max(0) as usize)
+}
+
 /// One non-blocking `write(2)`: returns how many bytes the kernel took (0 when its buffer is
 /// full).
 pub(crate) fn write_nb(fd: RawFd, data: &[u8]) -> Result<usize, HwError> {

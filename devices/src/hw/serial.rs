@@ -113,8 +113,13 @@ impl SerialHardware {
         Ok(n)
     }
 
-    /// Reads what is pending (never blocks; 0 when nothing is).
+    /// Reads what is pending (never blocks; 0 when nothing is). It asks how much is ready
+    /// first: an empty `read(2)` on a tty waits for the kernel's receive worker (see
+    /// [`fd::pending`]).
     pub fn read_some(&mut self, out: &mut [u8]) -> Result<usize, HwError> {
+        if fd::pending(self.fd)? == 0 {
+            return Ok(0);
+        }
         let n = fd::read_nb(self.fd, out)?;
         self.bytes_in += n as u64;
         Ok(n)
