@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 use conductor_protocols::score_link::{
     decode_reply, encode_request, ErrorCode, FrameScanner, Reply, Request, MAX_FRAME,
 };
-use serialport::TTYPort;
+use serialport::{SerialPort as _, TTYPort};
 
 use crate::error::GatewayError;
 
@@ -22,6 +22,10 @@ pub const REPLY_TIMEOUT: Duration = Duration::from_secs(3);
 /// The board answers within a few ms; a duplicate `Set` writes the same value twice and its
 /// late answer is ignored (its sequence number is no longer awaited).
 pub const RESEND_AFTER: Duration = Duration::from_millis(20);
+
+/// How long a read that finds nothing waits before the gateway's loop goes on: the pace of
+/// an idle gateway (its watchdog and command checks run between reads).
+pub const IDLE_WAIT: Duration = Duration::from_millis(1);
 
 /// A variable as the board lists it.
 #[derive(Debug, Clone, PartialEq)]
@@ -126,7 +130,8 @@ impl BoardClient {
         self.events.pop_front()
     }
 
-    /// Reads what the port has (waiting at most the port timeout) into the event queue.
+    /// Reads what the port has into the event queue (waiting [`IDLE_WAIT`] when it has
+    /// nothing).
     pub fn poll(&mut self) -> Result<(), GatewayError> {
         self.read_into(&mut |_, _| false)
     }
@@ -135,6 +140,17 @@ impl BoardClient {
         &mut self,
         on_reply: &mut dyn FnMut(u16, &Reply<'_>) -> bool,
     ) -> Result<(), GatewayError> {
+        // Ask first: a read (or poll) on a tty that finds nothing ready waits for the kernel's
+        // receive worker, a normal-priority kworker that a busy machine can keep off the CPU
+        // for hundreds of milliseconds, and the command watchdog would wait with it.
+        match self.port.bytes_to_read() {
+            Ok(0) => {
+                std::thread::sleep(IDLE_WAIT);
+                return Ok(());
+            }
+            Ok(_) => {}
+            Err(e) => return Err(GatewayError::Disconnected(Some(e.into()))),
+        }
         let mut buf = [0u8; 4096];
         let n = match self.port.read(&mut buf) {
             Ok(0) => return Err(GatewayError::Disconnected(None)),
