@@ -481,26 +481,33 @@ fn hold_off_stays_limp_until_the_first_setpoint_then_moves_from_where_it_is() {
     assert!(exec.stop().success());
 }
 
-/// A noisy bus (1 % of the bytes damaged, half corrupted and half lost, both directions): every
-/// servo is still brought up, since each lifecycle step is retried and a lost reply is not a
-/// refusal (before, a step's ten tries were used up by losses: "does not answer").
-#[test]
-fn bring_up_survives_a_noisy_bus() {
-    let link = std::env::temp_dir().join(format!("conductor-edge-noisy-{}", std::process::id()));
+/// Six servos on a noisy bus at `link` (1 % of the bytes damaged, half corrupted and half
+/// lost, both directions; `seed` chooses which), logging what they take.
+fn noisy_bus(link: &std::path::Path, seed: u64) -> Running<DxlBusSim> {
     let noise = |seed| FaultConfig {
         corrupt: 0.005,
         drop: 0.005,
         seed,
         ..FaultConfig::default()
     };
+    let sim = run_dxl(
+        Endpoint::Pty(Pty::open(Some(link)).unwrap()),
+        ids(6),
+        noise(seed),
+        noise(seed ^ 0x5EED),
+    );
+    sim.sim().start_log();
+    sim
+}
+
+/// A noisy bus (1 % of the bytes damaged, half corrupted and half lost, both directions): every
+/// servo is still brought up, since each lifecycle step is retried and a lost reply is not a
+/// refusal (before, a step's ten tries were used up by losses: "does not answer").
+#[test]
+fn bring_up_survives_a_noisy_bus() {
+    let link = std::env::temp_dir().join(format!("conductor-edge-noisy-{}", std::process::id()));
     for seed in 1..=3u64 {
-        let sim = run_dxl(
-            Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
-            ids(6),
-            noise(seed),
-            noise(seed ^ 0x5EED),
-        );
-        sim.sim().start_log();
+        let sim = noisy_bus(&link, seed);
         let (r, _d) = start("noisy", &manifest(&link.display().to_string(), 6, "", ""));
         match r {
             Ok(mut exec) => {
@@ -528,20 +535,8 @@ fn bring_up_survives_a_noisy_bus() {
 #[test]
 fn a_stop_during_a_watchdog_trip_confirms_every_hold() {
     let link = std::env::temp_dir().join(format!("conductor-edge-stoptrip-{}", std::process::id()));
-    let noise = |seed| FaultConfig {
-        corrupt: 0.005,
-        drop: 0.005,
-        seed,
-        ..FaultConfig::default()
-    };
     for (seed, after_ms) in [(1u64, 0u64), (2, 2), (3, 5), (4, 8), (5, 12), (6, 20)] {
-        let sim = run_dxl(
-            Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
-            ids(6),
-            noise(seed),
-            noise(seed ^ 0x5EED),
-        );
-        sim.sim().start_log();
+        let sim = noisy_bus(&link, seed);
         let (mut exec, d) = running(
             "stoptrip",
             &manifest(&link.display().to_string(), 6, "watchdog_ms = 100", ""),
