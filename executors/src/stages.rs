@@ -809,15 +809,23 @@ impl Stages {
         let (Some(timeout), Some(last)) = (w.timeout_ns, w.last_frame_ns) else {
             return;
         };
-        if w.tripped || sched_ns.saturating_sub(last) < timeout {
+        if !w.tripped && sched_ns.saturating_sub(last) < timeout {
             return;
         }
-        w.tripped = true;
-        self.counters.watchdog_trips += 1;
+        // While the source stays silent the watchdog holds: a device that sets out to drive
+        // meanwhile (an enable asked for just before the source died, completing after the
+        // timeout) is tripped as well, whether or not an earlier trip still marks it.
+        let first = !w.tripped;
+        if first {
+            w.tripped = true;
+            self.counters.watchdog_trips += 1;
+        }
         for di in 0..self.devices.len() {
             let d = &self.devices[di];
+            let setting_out =
+                d.status.managed() && matches!(d.status.phase, Phase::Enabling | Phase::Enabled);
             // Devices already tripped (or limp by their own choice) stay as they are.
-            if d.safe.is_none() || d.status.tripped {
+            if d.safe.is_none() || !(setting_out || (first && !d.status.tripped)) {
                 continue;
             }
             self.trip(di, ctx);

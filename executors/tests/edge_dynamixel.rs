@@ -337,6 +337,44 @@ fn the_watchdog_trips_setpoints_are_refused_until_enable_from_where_it_is() {
     assert!(exec.stop().success());
 }
 
+/// An enable asked for just before the command source fell silent, and finished only after
+/// the watchdog's timeout, must not leave the servo driving with nobody commanding it: the
+/// watchdog trips it too. (It skipped a device still marked by an earlier trip, and such a
+/// device is marked until its enable completes: the soak's MIT motors back in motor mode
+/// after a controller died while re-enabling them.)
+#[test]
+fn an_enable_that_completes_after_the_watchdog_fired_is_tripped_as_well() {
+    // The servo answers 6 ms after each request: enabling (read where it is, then write the
+    // goal and torque and read them back) takes longer than the 10 ms watchdog.
+    let cfg = DxlSimConfig {
+        return_delay_us: 6_000,
+        ..ids(1)
+    };
+    let (_sim, port) = bus("late-enable", cfg);
+    let (mut exec, d) = running("late-enable", &manifest(&port, 1, "watchdog_ms = 10", ""));
+    let bus = Bus::open(&d, "t").unwrap();
+    let mut ctl = Controller::new(&bus);
+    let mut p1 = Watch::new(&bus, "arm/p1");
+    let mut e1 = Watch::new(&bus, "arm/e1");
+    let tripped = status::WATCHDOG | status::TRIPPED;
+    // One frame, then silence: tripped.
+    send(&mut ctl, &[("arm/p1", 0.2)]);
+    p1.until(2.0, "tripped", |s| s.status & tripped == tripped);
+    e1.until(2.0, "not enabled", |s| s.value == 0.0);
+    // enable = 1, then silence again: it may finish enabling, but not stay so.
+    send(&mut ctl, &[("arm/e1", 1.0)]);
+    std::thread::sleep(Duration::from_millis(500));
+    let p = p1.poll().unwrap();
+    let e = e1.poll().unwrap();
+    assert_eq!(
+        (p.status & tripped, e.value),
+        (tripped, 0.0),
+        "driving with no command source: {p:?} {e:?}\n{:#?}",
+        exec.log()
+    );
+    assert!(exec.stop().success());
+}
+
 /// An executor that does not run for longer than its watchdog (descheduled on a loaded machine;
 /// here stopped with SIGSTOP) trips on its first tick back. Its hold must be where the servo is
 /// then, not where it was last read before the pause: the servo kept moving to its last goal
