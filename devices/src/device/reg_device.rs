@@ -408,6 +408,14 @@ impl<T: ControlTable> RegDevice<T> {
             // sends its writes and read-backs again (a hold's own read first, see
             // `HOLD_FRESH_NS`, then the hold).
             Step::Safe | Step::SafeAlign => {
+                if let Some((addr, len)) = self.refresh_hold(ctx.now_ns) {
+                    // Where it was read is not where it is now: read it again, then hold.
+                    self.life.go(Step::SafeAlign);
+                    self.life.base.mark_sent(ctx.tick, ctx.now_ns);
+                    self.life.expect(addr, len, None);
+                    self.push_read(addr, len, ctx, out);
+                    return;
+                }
                 for k in 0..self.life.n_expect {
                     // A new round: what the last one read (a goal the lost write never
                     // changed) is no answer to this one.
@@ -419,6 +427,30 @@ impl<T: ControlTable> RegDevice<T> {
                     self.push_read(e.addr, e.len, ctx, out);
                 }
             }
+        }
+    }
+
+    /// Before a hold is sent again: the servo may have moved since the reading it holds at
+    /// (a resend comes after the first round failed). A reading younger than
+    /// [`HOLD_FRESH_NS`] (the samples go on while it holds) becomes the goal; otherwise the
+    /// position must be read again first: its register is returned.
+    fn refresh_hold(&mut self, now_ns: u64) -> Option<(u16, u8)> {
+        if self.life.base.step != Step::Safe {
+            return None;
+        }
+        let (i, goal) = self.hold?;
+        let c = self.table[i];
+        let n = self.life.n_expect;
+        let k = self.life.expect[..n]
+            .iter()
+            .position(|e| e.addr == goal && e.want.is_some())?;
+        match self.last[i] {
+            Some(raw) if now_ns.saturating_sub(self.last_ns[i]) <= HOLD_FRESH_NS => {
+                self.life.expect[k].want =
+                    Some(c.encode_raw(raw.clamp(c.write_range.0, c.write_range.1)));
+                None
+            }
+            _ => c.read.map(|a| (a, c.len)),
         }
     }
 
