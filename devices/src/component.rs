@@ -160,6 +160,13 @@ pub trait Hardware {
     fn condition(&self) -> BusCondition {
         BusCondition::default()
     }
+    /// A time (CLOCK_MONOTONIC ns) before which every word that reached this host can be
+    /// received now, where the OS delivers received words late and the hardware watches for
+    /// it (a tty: its bytes pass through a kernel worker before a read can see them). `None`:
+    /// whatever arrived is receivable at once.
+    fn drained_ns(&self) -> Option<u64> {
+        None
+    }
     /// Urgent words follow (a safe action): drop the words taken but not yet handed to the OS,
     /// whole words only, and do not hold the next ones back for flow control.
     fn preempt(&mut self) {}
@@ -192,6 +199,9 @@ impl<H: Hardware + ?Sized> Hardware for Box<H> {
     }
     fn condition(&self) -> BusCondition {
         (**self).condition()
+    }
+    fn drained_ns(&self) -> Option<u64> {
+        (**self).drained_ns()
     }
     fn preempt(&mut self) {
         (**self).preempt()
@@ -295,6 +305,13 @@ pub trait Protocol {
     /// The words from stream position `from` on were dropped unsent.
     fn discard_unsent(&mut self, from: u64) {
         let _ = from;
+    }
+    /// Every word that reached the host before `t_ns` has been received and handed to
+    /// [`decode`](Self::decode) (see [`Hardware::drained_ns`]). A protocol whose replies carry
+    /// no transaction tag waits for this before asking again after replies went missing, so
+    /// that a late reply is not taken for the next one's.
+    fn line_drained(&mut self, t_ns: u64) {
+        let _ = t_ns;
     }
 }
 

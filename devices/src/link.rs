@@ -329,6 +329,9 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
         if room == 0 {
             return Ok(());
         }
+        // Taken before the read: what had reached the host by then is in this read, unless
+        // the read filled the room.
+        let drained = hw.drained_ns();
         let n = hw.receive(&mut self.rx_buf[..room], ctx)?;
         let unconfirmed = hw.rx_unconfirmed();
         let times = hw.rx_times();
@@ -337,6 +340,10 @@ impl<P: Protocol, H: Hardware<Word = P::Word>> LinkOf<P, H> {
             let behind = unconfirmed.get(i).copied().unwrap_or(0) as u64;
             let _ = self.rx_fence.push(self.taken.saturating_sub(behind));
             let _ = self.rx_time.push(times.get(i).copied().unwrap_or(0));
+        }
+        if let (Some(t), true) = (drained, n < room) {
+            self.decode_pending(ctx);
+            self.protocol.line_drained(t);
         }
         Ok(())
     }

@@ -144,6 +144,20 @@ pub(crate) fn pending(fd: RawFd) -> Result<usize, HwError> {
     Ok(n.max(0) as usize)
 }
 
+/// Waits until the tty's pending receive work has run, so that everything that reached the
+/// host before the call can be read: a `poll(2)` with no timeout does exactly that first
+/// (`n_tty_poll`). Blocks for as long as that worker waits for a CPU: never on the real-time
+/// thread.
+pub(crate) fn wait_receivable(fd: RawFd) {
+    let mut p = libc::pollfd {
+        fd,
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd; a timeout of 0 returns at once once the tty has been looked at.
+    unsafe { libc::poll(&mut p, 1, 0) };
+}
+
 /// One non-blocking `write(2)`: returns how many bytes the kernel took (0 when its buffer is
 /// full).
 pub(crate) fn write_nb(fd: RawFd, data: &[u8]) -> Result<usize, HwError> {

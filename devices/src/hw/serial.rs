@@ -1,8 +1,12 @@
 //! Serial ports (USB-serial adapters such as the ROBOTIS U2D2, RS-485 adapters, ptys).
 
 use std::os::unix::io::{AsRawFd, RawFd};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::thread::JoinHandle;
 use std::time::Duration;
 
+use nix::time::{clock_gettime, ClockId};
 use serialport::{DataBits, FlowControl, Parity, SerialPort, StopBits, TTYPort};
 
 use super::fd;
@@ -30,6 +34,12 @@ impl Default for SerialOptions {
 }
 
 /// A serial port in raw 8N1 mode, read and written without blocking.
+///
+/// A tty hands received bytes to readers through a normal-priority kernel worker, which a
+/// busy machine can keep off the CPU for hundreds of milliseconds. The real-time thread never
+/// waits for it (it reads only what `FIONREAD` reports); a helper thread does, and tells
+/// when the worker last caught up ([`Hardware::drained_ns`]), so the protocol can tell a
+/// quiet line from bytes still held up in the OS.
 pub struct SerialHardware {
     port: TTYPort,
     fd: RawFd,
@@ -37,6 +47,52 @@ pub struct SerialHardware {
     low_latency: bool,
     bytes_out: u64,
     bytes_in: u64,
+    drain: Drain,
+}
+
+/// The helper thread behind [`SerialHardware`]'s `drained_ns`.
+struct Drain {
+    drained_ns: Arc<AtomicU64>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// How often the helper waits for the tty's receive worker.
+const DRAIN_EVERY: Duration = Duration::from_micros(500);
+
+impl Drain {
+    fn spawn(fd: RawFd, path: &str) -> std::io::Result<Self> {
+        let drained_ns = Arc::new(AtomicU64::new(0));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (d, s) = (drained_ns.clone(), stop.clone());
+        let thread = std::thread::Builder::new()
+            .name(format!("drain-{}", path.rsplit('/').next().unwrap_or(path)))
+            .spawn(move || {
+                while !s.load(Ordering::Relaxed) {
+                    let t = clock_gettime(ClockId::CLOCK_MONOTONIC).map_or(0, |t| {
+                        t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64
+                    });
+                    fd::wait_receivable(fd);
+                    d.fetch_max(t, Ordering::Release);
+                    std::thread::sleep(DRAIN_EVERY);
+                }
+            })?;
+        Ok(Self {
+            drained_ns,
+            stop,
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for SerialHardware {
+    fn drop(&mut self) {
+        // The helper polls this descriptor: it stops before the port closes it.
+        self.drain.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.drain.thread.take() {
+            let _ = t.join();
+        }
+    }
 }
 
 impl std::fmt::Debug for SerialHardware {
@@ -76,6 +132,7 @@ impl SerialHardware {
         let low_latency = opts.low_latency && fd::set_low_latency(fd).is_ok();
         // Whatever the adapter buffered before we opened it belongs to nobody.
         let _ = port.clear(serialport::ClearBuffer::All);
+        let drain = Drain::spawn(fd, path)?;
         Ok(Self {
             port,
             fd,
@@ -83,6 +140,7 @@ impl SerialHardware {
             low_latency,
             bytes_out: 0,
             bytes_in: 0,
+            drain,
         })
     }
 
@@ -135,6 +193,10 @@ impl Hardware for SerialHardware {
 
     fn receive(&mut self, out: &mut [u8], _ctx: TickCtx) -> Result<usize, HwError> {
         self.read_some(out)
+    }
+
+    fn drained_ns(&self) -> Option<u64> {
+        Some(self.drain.drained_ns.load(Ordering::Acquire))
     }
 
     fn shutdown(&mut self) {
@@ -209,6 +271,36 @@ mod tests {
         }
         assert_eq!(&buf[..n], b"abc");
         assert_eq!((hw.bytes_out(), hw.bytes_in()), (5, 3));
+        drop(slave);
+    }
+
+    /// Bytes that reached the port before [`Hardware::drained_ns`] are readable: the helper
+    /// waited for the tty's receive worker after they came, so one read takes them all.
+    #[test]
+    fn what_arrived_before_drained_ns_is_read_in_one_go() {
+        let (mut master, slave) = TTYPort::pair().expect("pty pair");
+        let path = slave.name().unwrap();
+        let mut hw = SerialHardware::open(&path, &SerialOptions::default()).unwrap();
+        let now = || {
+            let t = clock_gettime(ClockId::CLOCK_MONOTONIC).unwrap();
+            t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64
+        };
+        for round in 1..=20u8 {
+            let payload = [round; 7];
+            std::io::Write::write_all(&mut master, &payload).unwrap();
+            let written = now();
+            let end = std::time::Instant::now() + Duration::from_secs(10);
+            while hw.drained_ns().unwrap() < written {
+                assert!(
+                    std::time::Instant::now() < end,
+                    "the helper never caught up"
+                );
+                std::thread::sleep(Duration::from_micros(100));
+            }
+            let mut buf = [0u8; 16];
+            assert_eq!(hw.receive(&mut buf, ctx()).unwrap(), 7, "round {round}");
+            assert_eq!(&buf[..7], &payload);
+        }
         drop(slave);
     }
 

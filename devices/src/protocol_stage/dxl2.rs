@@ -324,6 +324,36 @@ mod tests {
         assert_eq!(p.counters().dropped_requests, 0);
     }
 
+    /// On a tty the OS may still hold a reply when the line looks quiet (its receive worker
+    /// kept off the CPU). After missing replies, the next transaction waits until the
+    /// hardware says everything that arrived before the quiet time has been decoded: the late
+    /// reply, with the same ID and length, would otherwise answer it with an old value.
+    #[test]
+    fn after_missing_replies_the_next_read_waits_for_the_os_to_deliver() {
+        let mut p = Dxl2Protocol::new(timing(), Dxl2ReadMode::Sync, 2, 16);
+        let mut out = Bounded::with_capacity(512);
+        let read = |t| req(1, Op::Read { addr: 132, len: 4 }, t);
+        p.line_drained(0);
+        p.encode(&[read(0)], &mut out, ctx(0));
+        let first = out.len();
+        let mut replies = Bounded::with_capacity(8);
+        p.expire(&mut replies, ctx(14));
+        assert!(matches!(replies.as_slice(), [r] if matches!(r.data, ReplyData::Missing { .. })));
+        // Quiet for one timeout (to 2.4 ms), but the OS was last seen caught up at 1 ms.
+        p.line_drained(100_000);
+        p.encode(&[read(25)], &mut out, ctx(25));
+        p.encode(&[], &mut out, ctx(40));
+        assert_eq!(
+            out.len(),
+            first,
+            "nothing sent while a reply may be held up"
+        );
+        // Caught up at 2.5 ms, after the quiet time: nothing came; the read goes out.
+        p.line_drained(2_500_000);
+        p.encode(&[], &mut out, ctx(41));
+        assert!(out.len() > first);
+    }
+
     #[test]
     fn unsendable_reads_are_missing_not_silent() {
         let mut p = Dxl2Protocol::new(timing(), Dxl2ReadMode::Sync, 2, 16);

@@ -215,6 +215,10 @@ impl<D: Dialect, const N: usize> RegisterBus<D, N> {
         self.core.preempt();
     }
 
+    pub fn line_drained(&mut self, t_ns: u64) {
+        self.core.line_drained(t_ns);
+    }
+
     pub fn reset(&mut self, out: &mut Bounded<Reply>) {
         let Self {
             core,
@@ -280,6 +284,10 @@ macro_rules! protocol_over_register_bus {
 
             fn preempt(&mut self) {
                 self.stage.preempt();
+            }
+
+            fn line_drained(&mut self, t_ns: u64) {
+                self.stage.line_drained(t_ns);
             }
         }
     };

@@ -187,6 +187,10 @@ pub(crate) struct Core {
     bus_free_at: u64,
     /// After missing replies: nothing is sent before the line has been quiet until then.
     quiet_until: u64,
+    /// Everything that reached the host before this time has been decoded (`None`: the
+    /// hardware delivers at once). A quiet line means little while bytes may still be on
+    /// their way through the OS: see [`line_drained`](Self::line_drained).
+    drained_ns: Option<u64>,
     last_rx_ns: u64,
     rr: u8,
     pub counters: ProtocolCounters,
@@ -230,6 +234,7 @@ impl Core {
             next_seq: 0,
             bus_free_at: 0,
             quiet_until: 0,
+            drained_ns: None,
             last_rx_ns: 0,
             rr: 0,
             counters: ProtocolCounters::default(),
@@ -315,6 +320,7 @@ impl Core {
     pub fn bus_free(&self, now_ns: u64) -> bool {
         now_ns >= self.bus_free_at
             && now_ns >= self.quiet_until
+            && self.drained_ns.is_none_or(|d| d >= self.quiet_until)
             && !self.txns.iter().any(|x| x.active && !x.expired)
             && self.txns.iter().any(|x| !x.active)
     }
@@ -549,6 +555,15 @@ impl Core {
         };
         out.extend(x.entries.iter().map(|e| e.len as usize));
         true
+    }
+
+    /// Every byte that reached the host before `t_ns` has been decoded. After missing replies
+    /// the next transaction waits for this to pass the quiet time too: a reply held up in the
+    /// OS (a tty's receive worker kept off the CPU) would otherwise surface after the line
+    /// looked quiet and be taken for the next transaction's answer, with the same IDs and
+    /// lengths: an old value published as new.
+    pub fn line_drained(&mut self, t_ns: u64) {
+        self.drained_ns = Some(self.drained_ns.map_or(t_ns, |d| d.max(t_ns)));
     }
 
     /// Bytes arrived at `now_ns`.
