@@ -172,8 +172,7 @@ impl SerialHardware {
     }
 
     /// Reads what is pending (never blocks; 0 when nothing is). It asks how much is ready
-    /// first: an empty `read(2)` on a tty waits for the kernel's receive worker (see
-    /// [`fd::pending`]).
+    /// first: an empty `read(2)` on a tty waits for the kernel's receive worker.
     pub fn read_some(&mut self, out: &mut [u8]) -> Result<usize, HwError> {
         if fd::pending(self.fd)? == 0 {
             return Ok(0);
