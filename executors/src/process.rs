@@ -225,6 +225,11 @@ pub fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     for line in &up.missing {
         note!("{tag}: warning: optional {line}; its states stay STALE until it answers");
     }
+    // Asked to stop while bringing the devices up: a stop, not a failure to run.
+    if stop.flag().load(std::sync::atomic::Ordering::Relaxed) {
+        let r = exec.shutdown(sub.period_ns, last + 1, STOP_CONFIRM_NS);
+        return stopped(&tag, &exec, &r);
+    }
     if !up.failed.is_empty() {
         for line in &up.failed {
             note!("{tag}: error: {line}");
@@ -238,10 +243,6 @@ pub fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
             up.failed.len()
         );
         return EXIT_CONFIG;
-    }
-    if stop.flag().load(std::sync::atomic::Ordering::Relaxed) {
-        let r = exec.shutdown(sub.period_ns, last + 1, STOP_CONFIRM_NS);
-        return stopped(&tag, &exec, &r);
     }
 
     let mut out = std::io::stdout();

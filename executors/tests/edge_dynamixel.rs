@@ -131,6 +131,38 @@ fn a_missing_servo_is_an_error_unless_optional() {
     drop(sim);
 }
 
+/// A stop asked for while the devices are still being brought up (a servo that does not
+/// answer yet) is a stop: exit status 0, not "cannot run" (which a launcher would take for a
+/// robot that is not as its manifest says).
+#[test]
+fn a_stop_during_bring_up_is_a_stop_not_a_failure() {
+    let (_sim, port) = bus("stop-bring-up", ids(1));
+    let d = Domain::unique("stop-bring-up").unwrap();
+    let path = support::temp_manifest("stop-bring-up", &manifest(&port, 2, "", ""));
+    let child = std::process::Command::new(support::EXECUTOR)
+        .arg("--manifest")
+        .arg(&path)
+        .args(["--subsystem", "arm", "--domain", d.name(), "--no-rt"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Servo 2 is not on the bus: the bring-up probes it for seconds.
+    std::thread::sleep(Duration::from_millis(500));
+    nix::sys::signal::kill(
+        nix::unistd::Pid::from_raw(child.id() as i32),
+        nix::sys::signal::Signal::SIGTERM,
+    )
+    .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 #[test]
 fn a_configuration_the_servo_refuses_is_an_error() {
     // Operating Mode 2 does not exist on an XM430: the servo answers Data Range Error and

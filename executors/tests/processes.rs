@@ -397,3 +397,61 @@ fn a_restarted_executor_starts_with_the_descriptors_of_the_first() {
         "{counts:?} (last pid {pid})"
     );
 }
+
+/// An executor restarted after a crash whose servo does not answer yet cannot bring it up
+/// and exits "cannot run" (after its 5 s bring-up time); it ran before, so the launcher
+/// retries it like a crash (within the same bounds) instead of ending the launch, and it runs
+/// again once the servo answers.
+#[test]
+fn a_restarted_executor_whose_devices_do_not_answer_is_retried_until_they_do() {
+    use conductor_devices::sim::dxl::DxlSimConfig;
+    use conductor_devices::sim::fault::FaultConfig;
+    use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty};
+    let (d, _guard) = private_domain("retry");
+    let link = std::env::temp_dir().join(format!("conductor-retry-{}", std::process::id()));
+    let sim = run_dxl(
+        Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
+        DxlSimConfig {
+            ids: vec![1],
+            ..DxlSimConfig::default()
+        },
+        FaultConfig::default(),
+        FaultConfig::default(),
+    );
+    let text = format!(
+        "system = \"retry\"\n[subsystems.arm]\nrate_hz = 100\n\
+         [subsystems.arm.hardware.uart]\nkind = \"serial\"\nport = \"{}\"\n\
+         [subsystems.arm.protocols.robotis]\nkind = \"dynamixel2\"\nhardware = \"uart\"\n\
+         [subsystems.arm.devices.j1]\nkind = \"dynamixel_x\"\nprotocol = \"robotis\"\nid = 1\n\
+         [subsystems.arm.states.p1]\ndevice = \"j1\"\nchannel = \"position\"\n",
+        link.display()
+    );
+    let launch = Launch::start(&temp_manifest("retry", &text), options(&d)).unwrap();
+    let first = launch.pid("arm").unwrap();
+    // The servo stops answering and the executor crashes: its successor cannot bring it up.
+    sim.pause_reading(true);
+    kill(Pid::from_raw(first as i32), Signal::SIGKILL).unwrap();
+    eventually(
+        30,
+        "a restart after one that could not bring the servo up",
+        || (launch.executors()[0].restarts >= 2).then_some(()),
+    );
+    sim.pause_reading(false);
+    eventually(30, "an executor ready again once the servo answers", || {
+        let e = &launch.executors()[0];
+        (e.ready && e.pid.is_some_and(|p| p != first)).then_some(())
+    });
+    let bus = Bus::open(&d, "t").unwrap();
+    let since = now_ns();
+    // The state exists again once an executor runs.
+    let mut p1 = None;
+    eventually(20, "fresh samples once the servo answers", || {
+        if p1.is_none() {
+            p1 = conductor_bus::StateSubscriber::new(&bus, "arm/p1").ok();
+        }
+        let s = p1.as_mut()?.latest().ok().flatten()?;
+        (s.t_sample_ns > since && s.status & status::STALE == 0).then_some(())
+    });
+    launch.stop();
+    launch.wait().unwrap();
+}

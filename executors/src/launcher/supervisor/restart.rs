@@ -1,6 +1,8 @@
 //! Restarts: a supervised process that exited is restarted after a back-off that doubles with
 //! each consecutive crash (reset after a stable run), within a bounded number of crashes per
-//! window; one that cannot run, or an auxiliary one that keeps crashing, is given up.
+//! window; one that cannot run at its first start, or an auxiliary one that keeps crashing,
+//! is given up. An executor that ran before and cannot bring its devices up after a restart
+//! is retried as a crash.
 
 use std::time::{Duration, Instant};
 
@@ -75,7 +77,11 @@ impl Supervisor {
             self.give_up(i, format!("it cannot run ({})", describe(&status)));
             return Ok(());
         }
-        if matches!(code, Some(EXIT_CONFIG) | Some(EXIT_NO_RT)) {
+        // An executor that ran before and now cannot bring its devices up (a bus not back
+        // yet, devices rebooting) is retried like a crash, within the same bounds: what ran
+        // once may run again. At its first start, "cannot run" ends the launch.
+        let ran_before = c.restarts > 0 && code == Some(EXIT_CONFIG);
+        if matches!(code, Some(EXIT_CONFIG) | Some(EXIT_NO_RT)) && !ran_before {
             c.phase = Phase::Stopped;
             c.drain_output();
             self.set_info(i, None, false);
