@@ -27,6 +27,10 @@ pub const RESEND_AFTER: Duration = Duration::from_millis(20);
 /// an idle gateway (its watchdog and command checks run between reads).
 pub const IDLE_WAIT: Duration = Duration::from_millis(1);
 
+/// The same while an answer is awaited (a board answers within a fraction of a millisecond:
+/// every command is one round trip).
+pub const REPLY_WAIT: Duration = Duration::from_micros(50);
+
 /// A variable as the board lists it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BoardVar {
@@ -133,11 +137,12 @@ impl BoardClient {
     /// Reads what the port has into the event queue (waiting [`IDLE_WAIT`] when it has
     /// nothing).
     pub fn poll(&mut self) -> Result<(), GatewayError> {
-        self.read_into(&mut |_, _| false)
+        self.read_into(IDLE_WAIT, &mut |_, _| false)
     }
 
     fn read_into(
         &mut self,
+        idle: Duration,
         on_reply: &mut dyn FnMut(u16, &Reply<'_>) -> bool,
     ) -> Result<(), GatewayError> {
         // Ask first: a read (or poll) on a tty that finds nothing ready waits for the kernel's
@@ -145,7 +150,7 @@ impl BoardClient {
         // for hundreds of milliseconds, and the command watchdog would wait with it.
         match self.port.bytes_to_read() {
             Ok(0) => {
-                std::thread::sleep(IDLE_WAIT);
+                std::thread::sleep(idle);
                 return Ok(());
             }
             Ok(_) => {}
@@ -205,7 +210,7 @@ impl BoardClient {
                     .map_err(|e| GatewayError::Disconnected(Some(e)))?;
                 sent = Some(Instant::now());
             }
-            self.read_into(&mut |s, r| {
+            self.read_into(REPLY_WAIT, &mut |s, r| {
                 if s != seq {
                     return false;
                 }
