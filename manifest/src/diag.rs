@@ -78,10 +78,13 @@ impl Diags {
         let mut items = self.items;
         items.sort_by_key(|(pos, _, _, _)| *pos);
         items.dedup();
+        // The positions ascend, so one pass over the source places them all (a scan from the
+        // start per diagnostic was quadratic in a file with many errors).
+        let mut place = Places::new(source);
         items
             .into_iter()
             .map(|(pos, severity, key, message)| {
-                let (line, column) = line_column(source, pos);
+                let (line, column) = place.at(pos);
                 Diagnostic {
                     severity,
                     file: file.to_string(),
@@ -105,6 +108,48 @@ pub(crate) fn line_column(source: &str, pos: usize) -> (usize, usize) {
     let line = before.matches('\n').count() + 1;
     let line_start = before.rfind('\n').map_or(0, |i| i + 1);
     (line, source[line_start..pos].chars().count() + 1)
+}
+
+/// [`line_column`] of ascending positions, in one pass over the source.
+struct Places<'s> {
+    source: &'s str,
+    /// Byte offset reached (a character boundary), and its 1-based line and column.
+    pos: usize,
+    line: usize,
+    column: usize,
+}
+
+impl<'s> Places<'s> {
+    fn new(source: &'s str) -> Self {
+        Self {
+            source,
+            pos: 0,
+            line: 1,
+            column: 1,
+        }
+    }
+
+    /// [`line_column`]`(source, pos)`; from where the previous call got to when `pos` is not
+    /// before it.
+    fn at(&mut self, pos: usize) -> (usize, usize) {
+        let mut pos = pos.min(self.source.len());
+        while !self.source.is_char_boundary(pos) {
+            pos -= 1;
+        }
+        if pos < self.pos {
+            return line_column(self.source, pos);
+        }
+        for c in self.source[self.pos..pos].chars() {
+            if c == '\n' {
+                self.line += 1;
+                self.column = 1;
+            } else {
+                self.column += 1;
+            }
+        }
+        self.pos = pos;
+        (self.line, self.column)
+    }
 }
 
 /// Edit distance, for "did you mean" hints on misspelt keys and names.
@@ -196,6 +241,17 @@ mod tests {
         // 'µ' is two bytes: the '=' after it is character 3 of line 2.
         assert_eq!(line_column(s, 9), (2, 3));
         assert_eq!(line_column(s, 1000), (3, 1));
+    }
+
+    #[test]
+    fn one_pass_places_agree_with_line_column_everywhere() {
+        let s = "a = 1\r\nµ = \"€x\"\n\n  [t]\nend";
+        let mut place = Places::new(s);
+        // Every offset in order (inside characters too, and past the end), then one going back.
+        for pos in 0..s.len() + 3 {
+            assert_eq!(place.at(pos), line_column(s, pos), "offset {pos}");
+        }
+        assert_eq!(place.at(7), line_column(s, 7));
     }
 
     #[test]

@@ -167,13 +167,20 @@ fn syntax_message(source: &str, span: &Range<usize>, message: &str) -> String {
     if message != "duplicate key" {
         return format!("invalid TOML: {message}");
     }
-    let (line, _) = line_column(source, span.start);
-    let text = source.lines().nth(line - 1).unwrap_or("").trim();
+    // The line holding the span, found from the span (a parse can report many duplicates, and
+    // counting lines from the start for each made that quadratic).
+    let mut pos = span.start.min(source.len());
+    while !source.is_char_boundary(pos) {
+        pos -= 1;
+    }
+    let start = source[..pos].rfind('\n').map_or(0, |i| i + 1);
+    let end = source[pos..].find('\n').map_or(source.len(), |i| pos + i);
+    let text = source[start..end].trim();
     if text.starts_with('[') {
         let first = source
             .lines()
             .position(|l| l.trim() == text)
-            .map_or(line, |i| i + 1);
+            .map_or_else(|| line_column(source, pos).0, |i| i + 1);
         format!(
             "table {text} is defined twice (first on line {first}); expected each name once \
              within its section"

@@ -81,7 +81,7 @@ pub enum CliError {
         /// The OS error.
         source: std::io::Error,
     },
-    /// The MCAP library refused a file or a record.
+    /// The MCAP library refused to write a file or a record (reading: [`CliError::Recording`]).
     #[error("{}: MCAP: {detail}", path.display())]
     Mcap {
         /// The file.
@@ -89,14 +89,9 @@ pub enum CliError {
         /// The library's message.
         detail: String,
     },
-    /// A recording that `conductor` did not write, or that is damaged.
-    #[error("{}: {detail}", path.display())]
-    BadRecording {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        detail: String,
-    },
+    /// A recording that cannot be read, that `conductor` did not write, or that is damaged.
+    #[error(transparent)]
+    Recording(#[from] conductor_cli_formats::recording::RecordingError),
     /// Drawing the plot failed.
     #[error("plot: {0}")]
     Plot(String),

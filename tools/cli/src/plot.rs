@@ -12,7 +12,7 @@ use conductor_bus::status;
 
 use crate::cli::PlotArgs;
 use crate::error::{CliError, Result};
-use crate::recording::Recording;
+use crate::recording::{Recording, RecordingError};
 use crate::select::Selector;
 
 /// One line of the chart.
@@ -95,14 +95,15 @@ pub fn series(rec: &Recording, patterns: &[String], path: &Path) -> Result<Vec<S
         .collect();
     if chosen.is_empty() {
         let have: Vec<String> = rec.channels.iter().map(|c| c.qualified_name()).collect();
-        return Err(CliError::BadRecording {
+        return Err(RecordingError::Bad {
             path: path.into(),
             detail: format!(
                 "no recorded state matches {}; the file has: {}",
                 patterns.join(" "),
                 have.join(", ")
             ),
-        });
+        }
+        .into());
     }
     // Short labels (the state name) unless two subsystems share a name.
     let unique = |name: &str| {

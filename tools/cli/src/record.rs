@@ -10,7 +10,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cli::RecordArgs;
 use crate::error::{CliError, Result};
-use crate::recording::{self, Message};
+use crate::recording;
 use crate::select;
 
 /// Per-subscriber queue: at 1 kHz this covers a quarter second of the recorder not running.
@@ -105,7 +105,7 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
                 schema,
                 &recording::topic(&info.subsystem, &info.name),
                 recording::MESSAGE_ENCODING,
-                &recording::channel_metadata(info),
+                &info.metadata_strings(),
             )
             .map_err(mcap_err)?;
         tracks.push(Track {
@@ -177,7 +177,7 @@ pub fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordReport> {
                     continue;
                 }
                 body.clear();
-                recording::write_message(&mut body, &Message::of(&s));
+                recording::write_message(&mut body, &recording::message_of(&s));
                 w.write_to_known_channel(
                     &mcap::records::MessageHeader {
                         channel_id: t.channel,

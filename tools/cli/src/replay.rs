@@ -9,13 +9,13 @@
 use std::io::IsTerminal;
 use std::time::{Duration, Instant};
 
-use conductor_bus::{monotonic_ns, status, Bus, StateInfo, StatePublisher, StateSpec};
+use conductor_bus::{monotonic_ns, status, Bus, StateInfo, StateMeta, StatePublisher, StateSpec};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::cli::ReplayArgs;
 use crate::error::{CliError, Result};
 use crate::probe::Probe;
-use crate::recording::Recording;
+use crate::recording::{pass_ns, ChannelMeta, Recording, RecordingError};
 use crate::select::Selector;
 
 /// What a replay did.
@@ -92,31 +92,16 @@ fn refuse_live_states(
     )))
 }
 
-/// Length of one pass over `rec` (non-empty, `states` states published) in ns: the recording's
-/// span plus one mean sample period, so that a loop's first sample does not land on the
-/// previous pass's last; never 0.
-pub fn pass_ns(rec: &Recording, states: usize) -> u64 {
-    let (Some(first), Some(last)) = (rec.samples.first(), rec.samples.last()) else {
-        return 1_000_000;
-    };
-    let span = last.t_ns - first.t_ns;
-    let per_channel = (rec.samples.len() / states.max(1)).max(2) as u64;
-    // Saturating: a damaged file's times can span nearly all of u64 (found by the `recording`
-    // fuzz target; fuzz/regressions/recording/replay-span-overflows-pass-length).
-    let pass_ns = span.saturating_add(span / (per_channel - 1));
-    if pass_ns > 0 {
-        return pass_ns;
-    }
-    // One instant only (e.g. a single sample): repeat it at the fastest recorded rate.
-    let rate = rec
-        .channels
-        .iter()
-        .map(|c| c.meta.rate_hz)
-        .fold(0.0, f64::max);
-    if rate > 0.0 {
-        ((1e9 / rate) as u64).max(1)
-    } else {
-        1_000_000
+/// The bus metadata of a recorded state.
+fn state_meta(m: &ChannelMeta) -> StateMeta {
+    StateMeta {
+        index: m.index,
+        units: m.units.clone(),
+        writable: m.writable,
+        rate_hz: m.rate_hz,
+        min: m.min,
+        max: m.max,
+        device: m.device.clone(),
     }
 }
 
@@ -145,10 +130,11 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
         rec.samples.retain(|s| keep[s.channel as usize]);
     }
     if rec.samples.is_empty() {
-        return Err(CliError::BadRecording {
+        return Err(RecordingError::Bad {
             path: args.file.clone(),
             detail: "no samples to replay".into(),
-        });
+        }
+        .into());
     }
     let mut used = vec![false; rec.channels.len()];
     for s in &rec.samples {
@@ -171,9 +157,12 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
             }
         };
         let specs = &mut subsystems[p].1;
-        let mut meta = c.meta.clone();
-        meta.index = specs.len() as u32;
-        meta.writable = false;
+        // Re-indexed in its subsystem and read-only: no executor applies commands to a replay.
+        let meta = StateMeta {
+            index: specs.len() as u32,
+            writable: false,
+            ..state_meta(&c.meta)
+        };
         routes.push(Some(Route {
             publisher: p,
             index: specs.len(),

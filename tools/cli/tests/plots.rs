@@ -84,7 +84,7 @@ fn recording(path: &Path) {
                 status: flags | status::SIMULATED,
                 reserved: 0,
             };
-            r::write_message(&mut body, &r::Message::of(&s));
+            r::write_message(&mut body, &r::message_of(&s));
             w.write_to_known_channel(
                 &mcap::records::MessageHeader {
                     channel_id: *ch,

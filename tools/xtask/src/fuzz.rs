@@ -318,23 +318,28 @@ fn campaign(dir: &Path, krate: &str, target: &str, o: &Options) -> Result<Outcom
         .into_iter()
         .filter(|p| !before.contains(p) && p != &log_path)
         .collect();
-    let mut note = String::new();
-    if !out.status.success() && crashes.is_empty() {
-        note = format!("exit {}; see {}", out.status, log_path.display());
-    } else if let Some(i) = log.lines().position(|l| l.contains("panicked at")) {
-        // `thread '…' panicked at file:line:col:` then the message on the next line.
-        let mut lines = log.lines().skip(i);
-        let at = lines.next().unwrap_or_default();
+    let lines: Vec<&str> = log.lines().collect();
+    let note = if !out.status.success() && crashes.is_empty() {
+        format!("{}; see {}", out.status, log_path.display())
+    } else if crashes.is_empty() {
+        // A clean run: panics in its log were caught by the code under test (the recording
+        // reader refuses a file the mcap reader panics on), so they are no crash's cause.
+        String::new()
+    } else if let Some(i) = lines.iter().rposition(|l| l.contains("panicked at")) {
+        // The last panic is the fatal one: `panicked at file:line:col:`, then the message.
+        let at = lines[i];
         let at = at
             .split("panicked at ")
             .nth(1)
             .unwrap_or(at)
             .trim_end_matches(':');
-        let msg = lines.next().unwrap_or_default().trim();
-        note = format!("{at}: {msg}").chars().take(120).collect();
-    } else if let Some(line) = log.lines().find(|l| l.contains("ERROR: libFuzzer")) {
-        note = line.trim().chars().take(120).collect();
-    }
+        let msg = lines.get(i + 1).copied().unwrap_or_default().trim();
+        format!("{at}: {msg}").chars().take(120).collect()
+    } else if let Some(line) = lines.iter().find(|l| l.contains("ERROR: libFuzzer")) {
+        line.trim().chars().take(120).collect()
+    } else {
+        String::new()
+    };
     if o.update_seeds {
         update_seeds(dir, target, &corpus, &seeds, &regressions)?;
     }

@@ -1,13 +1,13 @@
-//! The checks behind each fuzz target of `conductor-cli`, one function per target taking the
-//! raw input. The libFuzzer binaries in `fuzz_targets/` call them, and
+//! The checks behind each fuzz target of `conductor-cli`'s readers of outside input (in
+//! `conductor-cli-formats`, which the CLI re-exports), one function per target taking the raw
+//! input. The libFuzzer binaries in `fuzz_targets/` call them, and
 //! `tools/cli/tests/fuzz_corpus.rs` includes this file to replay the committed seed and
 //! regression corpora as an ordinary test.
 
 use std::path::Path;
 
-use conductor_cli::recording::Recording;
-use conductor_cli::replay;
-use conductor_cli::udp::protocol::{self, Malformed, Request, MAX_REQUEST};
+use conductor_cli_formats::recording::{self, Recording};
+use conductor_cli_formats::udp::{self as protocol, Malformed, Request, MAX_REQUEST};
 
 /// A target's check: panics when the input shows a bug.
 pub type Check = fn(&[u8]);
@@ -54,6 +54,6 @@ pub fn recording(data: &[u8]) {
         .iter()
         .all(|s| (s.channel as usize) < rec.channels.len()));
     if !rec.samples.is_empty() {
-        assert!(replay::pass_ns(&rec, rec.channels.len()) > 0);
+        assert!(recording::pass_ns(&rec, rec.channels.len()) > 0);
     }
 }

@@ -5,7 +5,7 @@
 //! `base + i`, so a client can derive it from the manifest. Malformed datagrams are answered
 //! with `ERR <reason>` and counted; nothing a client sends can stop the gateway.
 
-pub mod protocol;
+pub use conductor_cli_formats::udp as protocol;
 
 use std::net::{IpAddr, SocketAddr, UdpSocket};
 use std::os::fd::AsRawFd;
