@@ -99,14 +99,8 @@ impl StatePublisher {
             }
             let name = naming::state(subsystem, &spec.name);
             let attrs = spec.meta.to_attributes()?;
-            let buffer = spec.buffer.max(1);
             let service = bus.create_or_reopen_pubsub::<StateSample>(&name, &attrs, |b| {
-                b.max_publishers(qos::STATE_PUBLISHERS)
-                    .max_subscribers(qos::STATE_SUBSCRIBERS)
-                    .max_nodes(qos::MAX_NODES)
-                    .history_size(1)
-                    .subscriber_max_buffer_size(buffer)
-                    .enable_safe_overflow(true)
+                qos::state_service(b, spec.buffer)
             })?;
             let port = service
                 .publisher_builder()

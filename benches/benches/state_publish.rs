@@ -1,0 +1,58 @@
+//! CPU cost of publishing states, in one process: a raw iceoryx2 publish of the 48-byte state
+//! payload with the states' own service configuration (the denominator of the executor's
+//! per-state cost, benches/README.md) beside `StatePublisher::publish`, and a whole tick of N
+//! states plus the tick event both ways. The method is in [`conductor_benches::publish_cost`].
+//!
+//! Criterion times each case (drains between batches excluded); the summary prints the
+//! interleaved medians and the Conductor / raw ratios of the same run.
+
+use std::time::Duration;
+
+use conductor_benches::publish_cost::{self, Path, PublishRig};
+use criterion::Criterion;
+
+fn main() {
+    let mut c = Criterion::default()
+        .configure_from_args()
+        .measurement_time(Duration::from_secs(2))
+        .warm_up_time(Duration::from_millis(500));
+    for subscribers in [0usize, 1] {
+        let mut g = c.benchmark_group(format!("publish_{subscribers}sub"));
+        for states in [1usize, 41] {
+            let mut rig = PublishRig::new(states, subscribers).unwrap_or_else(|e| panic!("{e}"));
+            for path in [Path::Raw, Path::State] {
+                // One state: a bare publish (no tick event); N states: the whole tick + event.
+                let notify = states > 1;
+                let id = format!("{}/{states}", path.name());
+                g.bench_function(id, |b| {
+                    b.iter_custom(|iters| {
+                        let ns = rig
+                            .time(path, notify, iters)
+                            .unwrap_or_else(|e| panic!("{e}"));
+                        Duration::from_nanos(ns)
+                    })
+                });
+            }
+        }
+        g.finish();
+    }
+    println!();
+    println!("Interleaved medians (21 rounds of 20 000 ticks), same run:");
+    println!("| states | subscribers | raw ns/state | state ns/state | ratio | raw ns/tick+event | state ns/tick+event | ratio |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for subscribers in [0usize, 1, 4] {
+        for states in [1usize, 41] {
+            let (raw, st) = publish_cost::measure(states, subscribers, 20_000, 21)
+                .unwrap_or_else(|e| panic!("{e}"));
+            println!(
+                "| {states} | {subscribers} | {:.1} | {:.1} | {:.2} | {:.0} | {:.0} | {:.2} |",
+                raw.per_state_ns,
+                st.per_state_ns,
+                st.per_state_ns / raw.per_state_ns,
+                raw.per_tick_ns,
+                st.per_tick_ns,
+                st.per_tick_ns / raw.per_tick_ns
+            );
+        }
+    }
+}
