@@ -34,6 +34,7 @@
 //!   devices are brought up again and resume;
 //! * each transition is an [`Event`] (drained by the executor into its log, never printed here).
 
+use crate::profile::{TickPhase, TickProfile};
 use conductor_bus::status;
 use conductor_devices::kinds::{self, BuildError, Capacity};
 use conductor_devices::lifecycle::REPROBE_NS;
@@ -290,6 +291,8 @@ pub struct Stages {
     counters: Counters,
     events: Bounded<Event>,
     started: bool,
+    /// Per-phase time of the ticks (opt-in; a no-op unless enabled).
+    profile: TickProfile,
 }
 
 impl core::fmt::Debug for Stages {
@@ -456,7 +459,24 @@ impl Stages {
             counters: Counters::default(),
             events: Bounded::with_capacity(256),
             started: false,
+            profile: TickProfile::default(),
         }
+    }
+
+    /// The per-phase profile of the ticks (recording only once enabled with
+    /// [`set_profile`](Self::set_profile)).
+    pub fn profile(&self) -> &TickProfile {
+        &self.profile
+    }
+
+    /// Replaces the per-phase profile (enable it with `TickProfile::new(true)`).
+    pub fn set_profile(&mut self, profile: TickProfile) {
+        self.profile = profile;
+    }
+
+    /// The profile, for the executor's own phase boundaries.
+    pub(crate) fn profile_mut(&mut self) -> &mut TickProfile {
+        &mut self.profile
     }
 
     /// Applies every setpoint of one command frame at once (thesis `sendCtrl`): each value is
@@ -588,6 +608,7 @@ impl Stages {
             d.dev.flush(ctx, out);
             self.counters.overflows += out.overflows() - before;
         }
+        self.profile.mark(TickPhase::Down);
 
         // 4–6. Hardware in, protocol down, hardware out, protocol up.
         for li in 0..self.links.len() {
@@ -597,23 +618,32 @@ impl Stages {
             l.urgent = false;
             if hw {
                 l.link.receive(ctx);
+                self.profile.mark(TickPhase::HardwareIo);
             }
+            let l = &mut self.links[li];
             if proto {
                 l.link.encode(l.requests.as_slice(), ctx);
                 l.requests.clear();
+                self.profile.mark(TickPhase::Protocol);
             }
-            if hw && l.link.exchange(ctx).is_err() {
-                self.counters.hw_errors += 1;
+            let l = &mut self.links[li];
+            if hw {
+                if l.link.exchange(ctx).is_err() {
+                    self.counters.hw_errors += 1;
+                }
+                self.profile.mark(TickPhase::HardwareIo);
             }
             if proto {
                 self.route_replies(li, ctx);
             }
             self.watch_link(li, ctx);
+            self.profile.mark(TickPhase::Protocol);
         }
 
         // 7. Device stage, upstream.
         self.devices_up(tick, ctx);
         self.watch_devices(ctx);
+        self.profile.mark(TickPhase::DeviceUp);
 
         // 8. State stage, upstream.
         let mut n = 0;
@@ -630,6 +660,8 @@ impl Stages {
             });
             n += 1;
         }
+        self.profile.published(n);
+        self.profile.mark(TickPhase::Publish);
         n
     }
 
