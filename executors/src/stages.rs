@@ -247,6 +247,9 @@ struct ScheduledDevice {
     up: Bounded<Reply>,
     updates: Bounded<Update>,
     channel_state: Vec<Option<usize>>,
+    /// Every state on this device (indices into `Stages::states`), so the per-tick lifecycle
+    /// pass visits its own states rather than filtering all of them (O(n) per tick, not O(n²)).
+    states: Vec<usize>,
     safe: Option<SafeAction>,
     startup: Startup,
     optional: bool,
@@ -380,9 +383,11 @@ impl Stages {
             let ratio = link.protocol_divisor.div_ceil(u64::from(d.divisor)) as usize;
             let up = per_device_tick(channels) * (ratio + 2) * 2;
             let mut channel_state = vec![None; channels];
+            let mut own_states = Vec::new();
             for (si, s) in sub.states.iter().enumerate() {
                 if s.device == i {
                     channel_state[s.channel] = Some(si);
+                    own_states.push(si);
                 }
             }
             let writable = sub.states.iter().any(|s| s.device == i && s.writable);
@@ -409,6 +414,7 @@ impl Stages {
                 up: Bounded::with_capacity(up),
                 updates: Bounded::with_capacity(up * channels.max(1)),
                 channel_state,
+                states: own_states,
                 safe,
                 startup: d.startup,
                 optional: d.optional,
@@ -418,6 +424,11 @@ impl Stages {
                 ever_up: false,
                 watchdog: false,
             });
+        }
+        // Replies are routed by credential with a binary search (a stable sort keeps the
+        // first-declared device first among equal credentials, as a linear search found it).
+        for l in &mut scheduled_links {
+            l.creds.sort_by_key(|&(c, _)| c);
         }
         let states = sub
             .states
@@ -672,7 +683,8 @@ impl Stages {
         l.link.decode(&mut l.replies, ctx);
         self.counters.overflows += l.replies.overflows() - before;
         for r in l.replies.as_slice() {
-            match l.creds.iter().find(|(c, _)| *c == r.cred) {
+            let at = l.creds.partition_point(|(c, _)| *c < r.cred);
+            match l.creds.get(at).filter(|(c, _)| *c == r.cred) {
                 Some(&(_, di)) => {
                     if self.devices[di].up.push(*r).is_err() {
                         self.counters.overflows += 1;
@@ -822,7 +834,8 @@ impl Stages {
             let st = d.dev.status();
             let absent = matches!(st.phase, Phase::Offline | Phase::Probing | Phase::Failed);
             let watchdog = d.watchdog;
-            for s in self.states.iter_mut().filter(|s| s.device == di) {
+            for &si in &d.states {
+                let s = &mut self.states[si];
                 s.disabled = st.managed() && !st.driving();
                 s.tripped = st.tripped;
                 s.fault |= st.fault != 0;
