@@ -179,15 +179,15 @@ fn raw_event(
 }
 
 /// A raw publish of one state sample, as the floor does it: loan, write in place (stamped
-/// after the loan, as [`StatePublisher::publish`] stamps), send.
+/// `t_publish_ns`), send.
 #[inline]
 pub fn raw_publish(
     port: &Publisher<RtIpc, StateSample, ()>,
     seq: u64,
     value: f64,
+    t_publish_ns: u64,
 ) -> Result<usize, PingPongError> {
     let sample = port.loan_uninit().map_err(|e| iox("loan")(e.to_string()))?;
-    let t_publish_ns = monotonic_ns();
     let sample = sample.write_payload(StateSample {
         seq,
         tick: seq,
@@ -397,7 +397,7 @@ impl PingPong {
         self.seq += 1;
         if self.mode.raw() {
             let v = if stop { -1.0 } else { 1.0 };
-            raw_publish(&self.raw, self.seq, v)?;
+            raw_publish(&self.raw, self.seq, v, monotonic_ns())?;
             if self.mode.event() {
                 self.notifier
                     .notify()

@@ -12,8 +12,8 @@
 use std::time::Instant;
 
 use conductor_bus::{
-    qos, Bus, Domain, RtIpc, StateMeta, StatePublisher, StateSample, StateSpec, StateSubscriber,
-    TickWaiter,
+    monotonic_ns, qos, Bus, Domain, RtIpc, StateMeta, StatePublisher, StateSample, StateSpec,
+    StateSubscriber, TickWaiter,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -30,18 +30,26 @@ pub const BATCH: u64 = 128;
 /// Which path a [`PublishRig`] times.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Path {
-    /// Raw iceoryx2: loan, write in place, send; raw event notify.
+    /// Raw iceoryx2: one clock read per tick, then loan, write in place, send per state; raw
+    /// event notify.
     Raw,
-    /// `StatePublisher::publish` and `notify_tick`.
+    /// `StatePublisher::publish_at` with one clock read per tick (what the executor does), and
+    /// `notify_tick`.
     State,
+    /// `StatePublisher::publish` (a clock read per state), and `notify_tick`.
+    StateClockPerState,
 }
 
 impl Path {
-    /// `raw` or `state`.
+    /// Every path, the floor first.
+    pub const ALL: [Path; 3] = [Path::Raw, Path::State, Path::StateClockPerState];
+
+    /// `raw`, `state` or `state-clock-per-state`.
     pub fn name(self) -> &'static str {
         match self {
             Path::Raw => "raw",
             Path::State => "state",
+            Path::StateClockPerState => "state-clock-per-state",
         }
     }
 }
@@ -181,8 +189,9 @@ impl PublishRig {
         let v = self.seq as f64;
         match path {
             Path::Raw => {
+                let t = monotonic_ns();
                 for p in &self.raw {
-                    raw_publish(p, self.seq, v)?;
+                    raw_publish(p, self.seq, v, t)?;
                 }
                 if notify {
                     self.notifier
@@ -191,6 +200,15 @@ impl PublishRig {
                 }
             }
             Path::State => {
+                let t = monotonic_ns();
+                for i in 0..self.states {
+                    self.state.publish_at(i, self.seq, self.seq, v, 0, t)?;
+                }
+                if notify {
+                    self.state.notify_tick()?;
+                }
+            }
+            Path::StateClockPerState => {
                 for i in 0..self.states {
                     self.state.publish(i, self.seq, self.seq, v, 0)?;
                 }
@@ -246,46 +264,47 @@ impl PublishRig {
 /// One path's cost per published state, median over rounds.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PublishCost {
+    /// The path.
+    pub path: Path,
     /// Median ns per state sample published (loan + write + send), no tick event.
     pub per_state_ns: f64,
     /// Median ns per tick of all the rig's states plus the tick event.
     pub per_tick_ns: f64,
 }
 
-/// Raw and Conductor publish costs of `states` states with `subscribers` each, measured
-/// interleaved (`rounds` rounds of `ticks` ticks per path, medians), so both see the same
-/// machine.
+/// The cost of every [`Path`] for `states` states with `subscribers` each, measured
+/// interleaved (`rounds` rounds of `ticks` ticks per path, medians), so all see the same
+/// machine. In [`Path::ALL`] order.
 pub fn measure(
     states: usize,
     subscribers: usize,
     ticks: u64,
     rounds: usize,
-) -> Result<(PublishCost, PublishCost), PingPongError> {
+) -> Result<Vec<PublishCost>, PingPongError> {
     let mut rig = PublishRig::new(states, subscribers)?;
     let ticks = ticks.max(1);
-    // Warm up both paths (first touches of every sample slot).
-    for p in [Path::Raw, Path::State] {
+    // Warm up every path (first touches of every sample slot).
+    for p in Path::ALL {
         rig.time(p, true, 2 * BATCH)?;
     }
     let n = rig.states() as f64;
-    let mut per = [Vec::new(), Vec::new(), Vec::new(), Vec::new()];
+    let mut per_state = vec![Vec::new(); Path::ALL.len()];
+    let mut per_tick = vec![Vec::new(); Path::ALL.len()];
     for _ in 0..rounds.max(1) {
-        for (k, p) in [Path::Raw, Path::State].into_iter().enumerate() {
-            per[k].push(rig.time(p, false, ticks)? as f64 / (ticks as f64 * n));
-            per[2 + k].push(rig.time(p, true, ticks)? as f64 / ticks as f64);
+        for (k, p) in Path::ALL.into_iter().enumerate() {
+            per_state[k].push(rig.time(p, false, ticks)? as f64 / (ticks as f64 * n));
+            per_tick[k].push(rig.time(p, true, ticks)? as f64 / ticks as f64);
         }
     }
-    let [a, b, c, d] = per.map(median);
-    Ok((
-        PublishCost {
-            per_state_ns: a,
-            per_tick_ns: c,
-        },
-        PublishCost {
-            per_state_ns: b,
-            per_tick_ns: d,
-        },
-    ))
+    Ok(Path::ALL
+        .into_iter()
+        .zip(per_state.into_iter().zip(per_tick))
+        .map(|(path, (s, t))| PublishCost {
+            path,
+            per_state_ns: median(s),
+            per_tick_ns: median(t),
+        })
+        .collect())
 }
 
 fn median(mut v: Vec<f64>) -> f64 {

@@ -174,9 +174,22 @@ impl Executor {
         stages.profile_mut().mark(TickPhase::Commands);
         let publisher = &mut self.publisher;
         let mut errors = 0;
+        // One clock read per tick: every state of the tick carries the time its first state
+        // was published (bus/ABI.md, `t_publish_ns`).
+        let mut t_publish_ns = 0;
         let published = stages.tick(wake.slot, wake.sched_ns, now_ns, |p| {
+            if t_publish_ns == 0 {
+                t_publish_ns = monotonic_ns();
+            }
             if publisher
-                .publish(p.index, p.tick, p.t_sample_ns, p.value, p.status)
+                .publish_at(
+                    p.index,
+                    p.tick,
+                    p.t_sample_ns,
+                    p.value,
+                    p.status,
+                    t_publish_ns,
+                )
                 .is_err()
             {
                 errors += 1;
