@@ -158,12 +158,17 @@ fn ack_service(
         .map_err(|e| PingPongError::Iox(format!("ack service: {e}")))
 }
 
-/// The raw state service: a state's payload and settings, no Conductor attributes.
-pub fn raw_state_service(n: &Node<RtIpc>, name: &str) -> Result<RawService, PingPongError> {
+/// The raw state service: a state's payload and settings (subscriber queues of up to
+/// `buffer`), no Conductor attributes.
+pub fn raw_state_service(
+    n: &Node<RtIpc>,
+    name: &str,
+    buffer: usize,
+) -> Result<RawService, PingPongError> {
     qos::state_service(
         n.service_builder(&service_name(name)?)
             .publish_subscribe::<StateSample>(),
-        BUFFER,
+        buffer,
     )
     .open_or_create()
     .map_err(|e| PingPongError::Iox(format!("service {name:?}: {e}")))
@@ -237,7 +242,7 @@ pub fn child(mode: Mode, domain: &str) -> Result<(), PingPongError> {
         Ok(true)
     };
     if mode.raw() {
-        let sub = raw_state_service(&n, "bench/ping")?
+        let sub = raw_state_service(&n, "bench/ping", BUFFER)?
             .subscriber_builder()
             .buffer_size(BUFFER)
             .create()
@@ -320,7 +325,7 @@ impl PingPong {
         let n = node(&d)?;
         // Everything the child opens exists before it starts.
         conductor_bus::prepare_thread();
-        let raw_svc = raw_state_service(&n, "bench/ping")?;
+        let raw_svc = raw_state_service(&n, "bench/ping", BUFFER)?;
         let raw = raw_svc
             .publisher_builder()
             .create()

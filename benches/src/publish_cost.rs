@@ -101,7 +101,7 @@ impl PublishRig {
         let mut raw = Vec::with_capacity(states);
         let mut raw_subs = Vec::new();
         for i in 0..states {
-            let svc = raw_state_service(&node, &format!("rawpub/s{i}"))?;
+            let svc = raw_state_service(&node, &format!("rawpub/s{i}"), qos::STATE_BUFFER)?;
             raw.push(
                 svc.publisher_builder()
                     .create()
