@@ -37,12 +37,12 @@ fn main() {
         g.finish();
     }
     println!();
-    println!("Interleaved medians (21 rounds of 20 000 ticks), same run; ratios to raw:");
+    println!("Interleaved medians (11 rounds of 5 000 ticks), same run; ratios to raw:");
     println!("| states | subscribers | path | ns/state | ratio | ns/tick incl. event | ratio |");
     println!("|---|---|---|---|---|---|---|");
     for subscribers in [0usize, 1, 4] {
         for states in [1usize, 41] {
-            let costs = publish_cost::measure(states, subscribers, 20_000, 21)
+            let costs = publish_cost::measure(states, subscribers, 5_000, 11)
                 .unwrap_or_else(|e| panic!("{e}"));
             let raw = costs[0];
             for c in &costs {
