@@ -6,6 +6,8 @@
 //!   (the tail is the point).
 //! * [`pingpong`] — one-way latency between two processes over raw iceoryx2 (the IPC floor) and
 //!   over the Conductor bus; used by the `bus_latency` criterion bench and by the suite.
+//! * [`publish_cost`] — CPU per published state: a raw iceoryx2 publish of the state payload
+//!   with the states' own service settings beside `StatePublisher::publish`, in one process.
 //! * [`suite`] — the thesis' stress test at 50 Hz – 10 kHz beside cyclictest and the IPC floor,
 //!   with a Markdown/JSON report and plots (`conductor bench`).
 //! * [`stress`] — the thesis' stress test itself: sine states launched through
@@ -14,6 +16,7 @@
 
 pub mod percentiles;
 pub mod pingpong;
+pub mod publish_cost;
 pub mod stress;
 pub mod suite;
 

@@ -8,11 +8,17 @@
 //! [`child_from_env`] first thing in `main`.
 //!
 //! Four paths ([`Mode`]):
-//! * `raw-busy`    raw iceoryx2 `u64` pub/sub, busy-polling subscriber (the IPC floor);
+//! * `raw-busy`    raw iceoryx2 pub/sub, busy-polling subscriber (the IPC floor);
 //! * `state-busy`  `StatePublisher` → `StateSubscriber`, busy-polling;
-//! * `raw-event`   raw `u64` pub/sub + event, the subscriber sleeping in `Listener::blocking_wait`
+//! * `raw-event`   raw pub/sub + event, the subscriber sleeping in `Listener::blocking_wait`
 //!   (the floor of every event-woken path);
 //! * `state-event` `StatePublisher` + tick event → `TickWaiter`.
+//!
+//! The raw floors are the states' own configuration without the Conductor layer: the same
+//! service variant ([`RtIpc`]), the same payload ([`StateSample`], 48 bytes, loaned, written in
+//! place and sent), the same service settings ([`qos::state_service`] with the same subscriber
+//! buffer, [`qos::tick_event`]) and the same polling or event wake-up. So a Conductor path can
+//! only add to its floor; a ratio below 1 beyond noise is a bug in the floor.
 //!
 //! Both sides poll in normal scheduling: the busy modes spin one CPU each for the run's length.
 
@@ -23,8 +29,8 @@ use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{
-    monotonic_ns, Bus, BusError, Domain, StateMeta, StatePublisher, StateSpec, StateSubscriber,
-    TickWaiter,
+    monotonic_ns, qos, Bus, BusError, Domain, RtIpc, StateMeta, StatePublisher, StateSample,
+    StateSpec, StateSubscriber, TickWaiter,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -38,6 +44,12 @@ use crate::Percentiles;
 pub const ROLE_ENV: &str = "CONDUCTOR_BENCH_ROLE";
 
 const STOP: u64 = u64::MAX;
+
+/// The per-subscriber queue of the measured state (raw and Conductor alike).
+const BUFFER: usize = 4;
+
+type RawService =
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, StateSample, ()>;
 
 /// A measured path.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -120,60 +132,77 @@ pub fn pin(cpu: usize) {
     }
 }
 
-fn node(d: &Domain) -> Result<Node<ipc::Service>, PingPongError> {
+fn node(d: &Domain) -> Result<Node<RtIpc>, PingPongError> {
     NodeBuilder::new()
         .config(d.iceoryx2_config())
-        .create::<ipc::Service>()
+        .create::<RtIpc>()
         .map_err(|e| PingPongError::Iox(format!("node: {e}")))
 }
 
-fn raw_service(
-    n: &Node<ipc::Service>,
-    name: &str,
+fn service_name(name: &str) -> Result<ServiceName, PingPongError> {
+    name.try_into()
+        .map_err(|e| PingPongError::Iox(format!("service name {name:?}: {e:?}")))
+}
+
+/// The ack channel back to the sender (the same for every mode, not measured).
+fn ack_service(
+    n: &Node<RtIpc>,
 ) -> Result<
-    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, u64, ()>,
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<RtIpc, u64, ()>,
     PingPongError,
 > {
-    let sn: ServiceName = name
-        .try_into()
-        .map_err(|e| PingPongError::Iox(format!("service name {name:?}: {e:?}")))?;
-    n.service_builder(&sn)
+    n.service_builder(&service_name("bench/ack")?)
         .publish_subscribe::<u64>()
-        .subscriber_max_buffer_size(4)
+        .subscriber_max_buffer_size(BUFFER)
         .open_or_create()
-        .map_err(|e| PingPongError::Iox(format!("service {name:?}: {e}")))
+        .map_err(|e| PingPongError::Iox(format!("ack service: {e}")))
 }
 
-fn raw_pub(
-    n: &Node<ipc::Service>,
+/// The raw state service: a state's payload and settings (subscriber queues of up to
+/// `buffer`), no Conductor attributes.
+pub fn raw_state_service(
+    n: &Node<RtIpc>,
     name: &str,
-) -> Result<Publisher<ipc::Service, u64, ()>, PingPongError> {
-    raw_service(n, name)?
-        .publisher_builder()
-        .create()
-        .map_err(|e| PingPongError::Iox(format!("publisher {name:?}: {e}")))
+    buffer: usize,
+) -> Result<RawService, PingPongError> {
+    qos::state_service(
+        n.service_builder(&service_name(name)?)
+            .publish_subscribe::<StateSample>(),
+        buffer,
+    )
+    .open_or_create()
+    .map_err(|e| PingPongError::Iox(format!("service {name:?}: {e}")))
 }
 
-fn raw_sub(
-    n: &Node<ipc::Service>,
-    name: &str,
-) -> Result<Subscriber<ipc::Service, u64, ()>, PingPongError> {
-    raw_service(n, name)?
-        .subscriber_builder()
-        .create()
-        .map_err(|e| PingPongError::Iox(format!("subscriber {name:?}: {e}")))
-}
-
+/// The raw tick event: a tick event's settings, no Conductor attributes.
 fn raw_event(
-    n: &Node<ipc::Service>,
-) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, PingPongError> {
-    let sn: ServiceName = "bench/ev"
-        .try_into()
-        .map_err(|e| PingPongError::Iox(format!("service name: {e:?}")))?;
-    n.service_builder(&sn)
-        .event()
+    n: &Node<RtIpc>,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<RtIpc>, PingPongError> {
+    qos::tick_event(n.service_builder(&service_name("bench/ev")?).event())
         .open_or_create()
         .map_err(|e| PingPongError::Iox(format!("event service: {e}")))
+}
+
+/// A raw publish of one state sample, as the floor does it: loan, write in place (stamped
+/// `t_publish_ns`), send.
+#[inline]
+pub fn raw_publish(
+    port: &Publisher<RtIpc, StateSample, ()>,
+    seq: u64,
+    value: f64,
+    t_publish_ns: u64,
+) -> Result<usize, PingPongError> {
+    let sample = port.loan_uninit().map_err(|e| iox("loan")(e.to_string()))?;
+    let sample = sample.write_payload(StateSample {
+        seq,
+        tick: seq,
+        t_sample_ns: t_publish_ns,
+        t_publish_ns,
+        value,
+        status: 0,
+        reserved: 0,
+    });
+    sample.send().map_err(|e| iox("send")(e.to_string()))
 }
 
 /// Runs the child side if [`ROLE_ENV`] is set: returns `None` when it is not (carry on as the
@@ -197,7 +226,10 @@ pub fn child(mode: Mode, domain: &str) -> Result<(), PingPongError> {
     pin(1);
     let d = Domain::new(domain)?;
     let n = node(&d)?;
-    let ack = raw_pub(&n, "bench/ack")?;
+    let ack = ack_service(&n)?
+        .publisher_builder()
+        .create()
+        .map_err(|e| PingPongError::Iox(format!("ack publisher: {e}")))?;
     let mut lat = Vec::with_capacity(1 << 20);
     let mut record = |stamp: u64| -> Result<bool, PingPongError> {
         let now = monotonic_ns();
@@ -210,9 +242,13 @@ pub fn child(mode: Mode, domain: &str) -> Result<(), PingPongError> {
         Ok(true)
     };
     if mode.raw() {
-        let sub = raw_sub(&n, "bench/ping")?;
+        let sub = raw_state_service(&n, "bench/ping", BUFFER)?
+            .subscriber_builder()
+            .buffer_size(BUFFER)
+            .create()
+            .map_err(|e| PingPongError::Iox(format!("subscriber: {e}")))?;
         let ev = raw_event(&n)?;
-        let listener: Listener<ipc::Service> = ev
+        let listener: Listener<RtIpc> = ev
             .listener_builder()
             .create()
             .map_err(|e| PingPongError::Iox(format!("listener: {e}")))?;
@@ -224,14 +260,14 @@ pub fn child(mode: Mode, domain: &str) -> Result<(), PingPongError> {
                     .map_err(|e| iox("waiting")(e.to_string()))?;
             }
             while let Some(s) = sub.receive().map_err(|e| iox("receive")(e.to_string()))? {
-                if !record(*s)? {
+                if !record(if s.value < 0.0 { STOP } else { s.t_publish_ns })? {
                     break 'outer;
                 }
             }
         }
     } else {
         let bus = Bus::open(&d, "bench-child")?;
-        let mut sub = StateSubscriber::with_buffer(&bus, "bench/q", 4)?;
+        let mut sub = StateSubscriber::with_buffer(&bus, "bench/q", BUFFER)?;
         let mut tick = TickWaiter::new(&bus, "bench")?;
         println!("READY");
         'outer2: loop {
@@ -257,16 +293,17 @@ pub fn child(mode: Mode, domain: &str) -> Result<(), PingPongError> {
 /// The sending side of one mode, in the parent process.
 pub struct PingPong {
     mode: Mode,
-    raw: Publisher<ipc::Service, u64, ()>,
-    notifier: Notifier<ipc::Service>,
+    raw: Publisher<RtIpc, StateSample, ()>,
+    notifier: Notifier<RtIpc>,
     state: StatePublisher,
-    ack: Subscriber<ipc::Service, u64, ()>,
+    ack: Subscriber<RtIpc, u64, ()>,
     child: Child,
     out: Receiver<String>,
     seq: u64,
     // Dropped last: the ports above live in this node's services.
-    _event: iceoryx2::service::port_factory::event::PortFactory<ipc::Service>,
-    _node: Node<ipc::Service>,
+    _raw: RawService,
+    _event: iceoryx2::service::port_factory::event::PortFactory<RtIpc>,
+    _node: Node<RtIpc>,
 }
 
 impl core::fmt::Debug for PingPong {
@@ -287,19 +324,27 @@ impl PingPong {
         let d = Domain::unique("benchlat")?;
         let n = node(&d)?;
         // Everything the child opens exists before it starts.
-        let raw = raw_pub(&n, "bench/ping")?;
+        conductor_bus::prepare_thread();
+        let raw_svc = raw_state_service(&n, "bench/ping", BUFFER)?;
+        let raw = raw_svc
+            .publisher_builder()
+            .create()
+            .map_err(|e| PingPongError::Iox(format!("publisher: {e}")))?;
         let ev = raw_event(&n)?;
         let notifier = ev
             .notifier_builder()
             .create()
             .map_err(|e| PingPongError::Iox(format!("notifier: {e}")))?;
-        let ack = raw_sub(&n, "bench/ack")?;
+        let ack = ack_service(&n)?
+            .subscriber_builder()
+            .create()
+            .map_err(|e| PingPongError::Iox(format!("ack subscriber: {e}")))?;
         let bus = Bus::open(&d, "bench-parent")?;
         let state = StatePublisher::create(
             &bus,
             "bench",
             &[StateSpec {
-                buffer: 4,
+                buffer: BUFFER,
                 ..StateSpec::new("q", StateMeta::default())
             }],
         )?;
@@ -328,6 +373,7 @@ impl PingPong {
             child,
             out,
             seq: 0,
+            _raw: raw_svc,
             _event: ev,
             _node: n,
         };
@@ -355,9 +401,8 @@ impl PingPong {
     fn send(&mut self, stop: bool) -> Result<(), PingPongError> {
         self.seq += 1;
         if self.mode.raw() {
-            self.raw
-                .send_copy(if stop { STOP } else { monotonic_ns() })
-                .map_err(|e| iox("send")(e.to_string()))?;
+            let v = if stop { -1.0 } else { 1.0 };
+            raw_publish(&self.raw, self.seq, v, monotonic_ns())?;
             if self.mode.event() {
                 self.notifier
                     .notify()

@@ -69,7 +69,9 @@ pub mod status {
 /// One sample of one State, published on `conductor/<subsystem>/<state>`.
 ///
 /// Times are `CLOCK_MONOTONIC` nanoseconds. `t_sample_ns` is when the hardware was sampled (the
-/// request time for request/reply buses), `t_publish_ns` when the executor handed it to the bus.
+/// request time for request/reply buses), `t_publish_ns` when the executor handed it to the bus
+/// (an executor reads the clock once per tick, before the tick's first state, and stamps every
+/// state of the tick with it).
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("conductor.StateSample.v2")]
 #[repr(C)]

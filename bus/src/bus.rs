@@ -17,8 +17,13 @@ use crate::naming;
 use crate::variant::RtIpc;
 
 /// Quality of service of every Conductor service. Owners create services with these values;
-/// clients open them without requirements, so the two never disagree.
-pub(crate) mod qos {
+/// clients open them without requirements, so the two never disagree. Public so that a
+/// benchmark's raw iceoryx2 floor can use the very configuration the states use
+/// ([`qos::state_service`], [`qos::tick_event`]).
+pub mod qos {
+    use iceoryx2::service::builder::{event, publish_subscribe};
+    use iceoryx2::service::Service;
+
     /// Processes that may attach to one service (executor, controllers, CLI, recorder, ...).
     pub const MAX_NODES: usize = 32;
     /// Publishers per state: the owner, plus one while a restarted owner replaces a dead one.
@@ -37,6 +42,35 @@ pub(crate) mod qos {
     pub const STATS_SUBSCRIBERS: usize = 8;
     /// Tick listeners.
     pub const TICK_LISTENERS: usize = 32;
+    /// Notifiers per tick event: the owner, plus one while a restarted owner replaces a dead one.
+    pub const TICK_NOTIFIERS: usize = 2;
+
+    /// A state service's settings: publishers, subscribers, nodes, a history of one sample (a
+    /// late subscriber gets the current value), per-subscriber queues of up to `buffer` samples
+    /// (at least 1), and safe overflow (a slow reader loses its oldest sample, the owner never
+    /// blocks).
+    pub fn state_service<T, S>(
+        b: publish_subscribe::Builder<T, (), S>,
+        buffer: usize,
+    ) -> publish_subscribe::Builder<T, (), S>
+    where
+        T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + 'static,
+        S: Service,
+    {
+        b.max_publishers(STATE_PUBLISHERS)
+            .max_subscribers(STATE_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(buffer.max(1))
+            .enable_safe_overflow(true)
+    }
+
+    /// A tick event's settings: listeners, notifiers, nodes.
+    pub fn tick_event<S: Service>(b: event::Builder<S>) -> event::Builder<S> {
+        b.max_listeners(TICK_LISTENERS)
+            .max_notifiers(TICK_NOTIFIERS)
+            .max_nodes(MAX_NODES)
+    }
 }
 
 pub(crate) type StateService = publish_subscribe::PortFactory<RtIpc, StateSample, ()>;
@@ -204,16 +238,13 @@ impl Bus {
     /// Opens (or creates) the tick event of `subsystem`.
     pub(crate) fn tick_event(&self, subsystem: &str) -> Result<EventService> {
         let name = naming::tick(subsystem);
-        self.node()
-            .service_builder(&Self::service_name(&name)?)
-            .event()
-            .max_listeners(qos::TICK_LISTENERS)
-            .max_notifiers(2)
-            .max_nodes(qos::MAX_NODES)
-            .open_or_create_with_attributes(&verifier(&metadata::base_attributes(
-                ServiceKind::Tick,
-            )?)?)
-            .map_err(|e| BusError::iceoryx(format!("opening tick event {name:?}"), e))
+        qos::tick_event(
+            self.node()
+                .service_builder(&Self::service_name(&name)?)
+                .event(),
+        )
+        .open_or_create_with_attributes(&verifier(&metadata::base_attributes(ServiceKind::Tick)?)?)
+        .map_err(|e| BusError::iceoryx(format!("opening tick event {name:?}"), e))
     }
 }
 

@@ -25,7 +25,7 @@ mod vector;
 pub use abi::{
     status, CommandFrame, ExecutorStats, Setpoint, StateSample, ABI_VERSION, MAX_SETPOINTS,
 };
-pub use bus::Bus;
+pub use bus::{qos, Bus};
 pub use clock::monotonic_ns;
 pub use controller::{CommandSender, Controller, SURFACE_HISTORY};
 pub use discovery::StateInfo;

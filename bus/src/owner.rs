@@ -99,14 +99,8 @@ impl StatePublisher {
             }
             let name = naming::state(subsystem, &spec.name);
             let attrs = spec.meta.to_attributes()?;
-            let buffer = spec.buffer.max(1);
             let service = bus.create_or_reopen_pubsub::<StateSample>(&name, &attrs, |b| {
-                b.max_publishers(qos::STATE_PUBLISHERS)
-                    .max_subscribers(qos::STATE_SUBSCRIBERS)
-                    .max_nodes(qos::MAX_NODES)
-                    .history_size(1)
-                    .subscriber_max_buffer_size(buffer)
-                    .enable_safe_overflow(true)
+                qos::state_service(b, spec.buffer)
             })?;
             let port = service
                 .publisher_builder()
@@ -145,7 +139,7 @@ impl StatePublisher {
         &self.subsystem
     }
 
-    /// Publishes a sample of state `index`; `seq` and `t_publish_ns` are filled in here.
+    /// Publishes a sample of state `index`; `seq` and `t_publish_ns` (now) are filled in here.
     /// Returns the number of subscribers reached.
     #[inline]
     pub fn publish(
@@ -156,19 +150,36 @@ impl StatePublisher {
         value: f64,
         status: u32,
     ) -> Result<usize> {
-        let port = self.ports.get(index).ok_or(BusError::NoSuchIndex {
-            index,
-            count: self.ports.len(),
-        })?;
-        let seq = self.seqs[index];
+        self.publish_at(index, tick, t_sample_ns, value, status, monotonic_ns())
+    }
+
+    /// [`publish`](Self::publish) with the caller's `t_publish_ns`: an executor reads the clock
+    /// once per tick, just before it publishes the tick's first state, and stamps every state
+    /// of the tick with it (`bus/ABI.md`), rather than once per state.
+    #[inline]
+    pub fn publish_at(
+        &mut self,
+        index: usize,
+        tick: u64,
+        t_sample_ns: u64,
+        value: f64,
+        status: u32,
+        t_publish_ns: u64,
+    ) -> Result<usize> {
+        let (Some(port), Some(seq)) = (self.ports.get(index), self.seqs.get_mut(index)) else {
+            return Err(BusError::NoSuchIndex {
+                index,
+                count: self.ports.len(),
+            });
+        };
         let sample = port
             .loan_uninit()
             .map_err(|e| BusError::iceoryx("loaning a state sample", e))?;
         let sample = sample.write_payload(StateSample {
-            seq,
+            seq: *seq,
             tick,
             t_sample_ns,
-            t_publish_ns: monotonic_ns(),
+            t_publish_ns,
             value,
             status,
             reserved: 0,
@@ -176,7 +187,7 @@ impl StatePublisher {
         let reached = sample
             .send()
             .map_err(|e| BusError::iceoryx("sending a state sample", e))?;
-        self.seqs[index] = seq + 1;
+        *seq += 1;
         Ok(reached)
     }
 

@@ -2,6 +2,8 @@
 //! reply to the request that caused it (never to one sent after the reply arrived), and tell a
 //! late reply from a stranger's frame.
 
+use std::collections::VecDeque;
+
 use crate::message::{Credential, Op, Reply, ReplyData, Request};
 use crate::queue::Bounded;
 
@@ -53,26 +55,59 @@ impl Pending {
     }
 }
 
+/// A FIFO of at most `cap` requests, allocated once. Replies mostly come in request order, so
+/// the request resolved is mostly the oldest: taking it out is O(1) here, where a `Vec` would
+/// shift every later request (O(n) per reply, O(n²) per tick of n requests).
+#[derive(Debug, Clone)]
+struct Fifo {
+    items: VecDeque<Pending>,
+    cap: usize,
+}
+
+impl Fifo {
+    fn with_capacity(cap: usize) -> Self {
+        Self {
+            items: VecDeque::with_capacity(cap),
+            cap,
+        }
+    }
+
+    /// Appends `p`; `false` (and nothing changes) when full: never reallocates.
+    fn push(&mut self, p: Pending) -> bool {
+        if self.items.len() >= self.cap {
+            return false;
+        }
+        self.items.push_back(p);
+        true
+    }
+
+    /// Removes the first request that `f` accepts, keeping the order of the rest.
+    fn take_first(&mut self, f: impl Fn(&Pending) -> bool) -> Option<Pending> {
+        let i = self.items.iter().position(f)?;
+        self.items.remove(i)
+    }
+}
+
 /// Fixed-capacity table of requests in flight, and of recently expired ones (whose replies, if
 /// they still come, are late).
 #[derive(Debug, Clone)]
 pub struct Outstanding {
-    pending: Bounded<Pending>,
-    expired: Bounded<Pending>,
+    pending: Fifo,
+    expired: Fifo,
 }
 
 impl Outstanding {
     /// Room for `capacity` requests in flight.
     pub fn with_capacity(capacity: usize) -> Self {
         Self {
-            pending: Bounded::with_capacity(capacity),
-            expired: Bounded::with_capacity(capacity),
+            pending: Fifo::with_capacity(capacity),
+            expired: Fifo::with_capacity(capacity),
         }
     }
 
     /// Registers a request; `false` if the table is full (the caller counts a dropped request).
     pub fn track(&mut self, p: Pending) -> bool {
-        self.pending.push(p).is_ok()
+        self.pending.push(p)
     }
 
     /// Removes and returns the oldest pending request from `cred` that `matches` and was on the
@@ -83,12 +118,8 @@ impl Outstanding {
         fence: u64,
         matches: impl Fn(&Op) -> bool,
     ) -> Option<Pending> {
-        let i = self
-            .pending
-            .as_slice()
-            .iter()
-            .position(|p| p.cred == cred && p.end_pos <= fence && matches(&p.op))?;
-        Some(self.pending.remove(i))
+        self.pending
+            .take_first(|p| p.cred == cred && p.end_pos <= fence && matches(&p.op))
     }
 
     /// A reply nobody pending can take: if it answers a request that expired (or one not yet
@@ -99,20 +130,16 @@ impl Outstanding {
         cred: Credential,
         matches: impl Fn(&Op) -> bool,
     ) -> Option<Pending> {
-        let i = self
-            .expired
-            .as_slice()
-            .iter()
-            .position(|p| p.cred == cred && matches(&p.op))?;
-        Some(self.expired.remove(i))
+        self.expired
+            .take_first(|p| p.cred == cred && matches(&p.op))
     }
 
     /// Forgets the requests whose words lie at or after stream position `from` (never sent);
     /// returns how many.
     pub fn forget_from(&mut self, from: u64) -> u64 {
-        let before = self.pending.len();
-        self.pending.retain(|p| p.end_pos <= from);
-        (before - self.pending.len()) as u64
+        let before = self.pending.items.len();
+        self.pending.items.retain(|p| p.end_pos <= from);
+        (before - self.pending.items.len()) as u64
     }
 
     /// Moves every request past its deadline into `out` as [`ReplyData::Missing`]; returns how
@@ -121,14 +148,14 @@ impl Outstanding {
     pub fn expire(&mut self, now_ns: u64, out: &mut Bounded<Reply>) -> u64 {
         let mut n = 0;
         let Self { pending, expired } = self;
-        pending.retain(|p| {
+        pending.items.retain(|p| {
             if p.deadline_ns > now_ns {
                 return true;
             }
             n += 1;
             let _ = out.push(p.reply(ReplyData::Missing { op: p.op }));
-            if expired.remaining() == 0 {
-                expired.remove(0);
+            if expired.items.len() >= expired.cap {
+                expired.items.pop_front();
             }
             let _ = expired.push(*p);
             false
@@ -139,29 +166,28 @@ impl Outstanding {
     /// Answers every request in flight with `Missing` and forgets everything (the bus was
     /// lost); returns how many.
     pub fn drain_missing(&mut self, out: &mut Bounded<Reply>) -> u64 {
-        let n = self.pending.len() as u64;
-        for p in self.pending.as_slice() {
+        let n = self.pending.items.len() as u64;
+        for p in &self.pending.items {
             let _ = out.push(p.reply(ReplyData::Missing { op: p.op }));
         }
-        self.pending.clear();
-        self.expired.clear();
+        self.clear();
         n
     }
 
     /// Requests in flight.
     pub fn len(&self) -> usize {
-        self.pending.len()
+        self.pending.items.len()
     }
 
     /// Whether nothing is in flight.
     pub fn is_empty(&self) -> bool {
-        self.pending.is_empty()
+        self.pending.items.is_empty()
     }
 
     /// Forgets everything (e.g. after the bus was reset).
     pub fn clear(&mut self) {
-        self.pending.clear();
-        self.expired.clear();
+        self.pending.items.clear();
+        self.expired.items.clear();
     }
 }
 

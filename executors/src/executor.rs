@@ -11,6 +11,7 @@ use conductor_devices::kinds::BuildError;
 use conductor_devices::TickCtx;
 
 use crate::events::{EventLog, Names};
+use crate::profile::{TickPhase, TickProfile};
 use crate::rt::RtStatus;
 use crate::schedule::{sleep_until, Schedule, Wake};
 use crate::stages::{Stages, Unconfirmed};
@@ -156,6 +157,7 @@ impl Executor {
     /// One base tick: drain and apply command frames, run the stages, publish what they produced,
     /// notify the tick event, and publish stats when due. Allocation-free.
     pub fn tick(&mut self, wake: &Wake, now_ns: u64) {
+        self.stages.profile_mut().begin();
         let h = &mut self.health;
         h.ticks += 1;
         h.misses += wake.skipped;
@@ -169,11 +171,25 @@ impl Executor {
         {
             h.command_errors += 1;
         }
+        stages.profile_mut().mark(TickPhase::Commands);
         let publisher = &mut self.publisher;
         let mut errors = 0;
+        // One clock read per tick: every state of the tick carries the time its first state
+        // was published (bus/ABI.md, `t_publish_ns`).
+        let mut t_publish_ns = 0;
         let published = stages.tick(wake.slot, wake.sched_ns, now_ns, |p| {
+            if t_publish_ns == 0 {
+                t_publish_ns = monotonic_ns();
+            }
             if publisher
-                .publish(p.index, p.tick, p.t_sample_ns, p.value, p.status)
+                .publish_at(
+                    p.index,
+                    p.tick,
+                    p.t_sample_ns,
+                    p.value,
+                    p.status,
+                    t_publish_ns,
+                )
                 .is_err()
             {
                 errors += 1;
@@ -183,6 +199,7 @@ impl Executor {
         if published > 0 && publisher.notify_tick().is_err() {
             h.publish_errors += 1;
         }
+        stages.profile_mut().mark(TickPhase::TickEvent);
         let (events, quiet) = (&mut self.events, self.bringing_up);
         stages.drain_events(|e| {
             let phase = matches!(e, crate::stages::Event::Phase { .. });
@@ -193,6 +210,7 @@ impl Executor {
         if now_ns >= h.next_stats_ns {
             self.publish_stats(now_ns);
         }
+        self.stages.profile_mut().mark(TickPhase::Stats);
     }
 
     fn publish_stats(&mut self, now_ns: u64) {
@@ -372,6 +390,16 @@ impl Executor {
     /// Ticks executed and deadlines missed so far.
     pub fn ticks_and_misses(&self) -> (u64, u64) {
         (self.health.ticks, self.health.misses)
+    }
+
+    /// Starts recording the per-phase profile of the ticks from now on (zeroed), or stops it.
+    pub fn enable_profile(&mut self, enabled: bool) {
+        self.stages.set_profile(TickProfile::new(enabled));
+    }
+
+    /// The per-phase profile of the ticks since [`enable_profile`](Self::enable_profile).
+    pub fn profile(&self) -> &TickProfile {
+        self.stages.profile()
     }
 
     /// The lateness histogram so far.

@@ -32,6 +32,7 @@ pub mod events;
 pub mod executor;
 pub mod launcher;
 pub mod process;
+pub mod profile;
 pub mod rt;
 pub mod schedule;
 pub mod signals;

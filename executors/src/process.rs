@@ -249,6 +249,10 @@ pub fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
     if writeln!(out, "{READY}").and_then(|_| out.flush()).is_err() {
         // Nobody reads our stdout any more (the launcher is gone): still run.
     }
+    // Opt-in per-phase tick profile (benches/README.md): recorded over the run, not the
+    // bring-up, and written when the run ends.
+    let profile_to = std::env::var_os(PROFILE_ENV).filter(|p| !p.is_empty());
+    exec.enable_profile(profile_to.is_some());
     let last = run_from(
         &mut exec,
         sub.period_ns,
@@ -257,9 +261,19 @@ pub fn execute(args: &ExecutorArgs, stop: &Stop) -> u8 {
         last + 1,
         |_| false,
     );
+    if let Some(path) = &profile_to {
+        let report = format!("states={}\n{}", sub.states.len(), exec.profile().report());
+        if let Err(e) = std::fs::write(path, report) {
+            note!("{tag}: warning: cannot write the tick profile to {path:?}: {e}");
+        }
+    }
     let r = exec.shutdown(sub.period_ns, last + 1, STOP_CONFIRM_NS);
     stopped(&tag, &exec, &r)
 }
+
+/// Environment variable naming a file: when set, the executor records how long each phase of
+/// its ticks takes ([`crate::profile::TickProfile`]) and writes the totals there when it stops.
+pub const PROFILE_ENV: &str = "CONDUCTOR_TICK_PROFILE";
 
 /// Reports a stop: each device whose safe action could not be confirmed, loudly, and the exit
 /// status (0 only when every safe action was confirmed on the wire).

@@ -34,6 +34,7 @@
 //!   devices are brought up again and resume;
 //! * each transition is an [`Event`] (drained by the executor into its log, never printed here).
 
+use crate::profile::{TickPhase, TickProfile};
 use conductor_bus::status;
 use conductor_devices::kinds::{self, BuildError, Capacity};
 use conductor_devices::lifecycle::REPROBE_NS;
@@ -246,6 +247,9 @@ struct ScheduledDevice {
     up: Bounded<Reply>,
     updates: Bounded<Update>,
     channel_state: Vec<Option<usize>>,
+    /// Every state on this device (indices into `Stages::states`), so the per-tick lifecycle
+    /// pass visits its own states rather than filtering all of them (O(n) per tick, not O(n²)).
+    states: Vec<usize>,
     safe: Option<SafeAction>,
     startup: Startup,
     optional: bool,
@@ -290,6 +294,8 @@ pub struct Stages {
     counters: Counters,
     events: Bounded<Event>,
     started: bool,
+    /// Per-phase time of the ticks (opt-in; a no-op unless enabled).
+    profile: TickProfile,
 }
 
 impl core::fmt::Debug for Stages {
@@ -377,9 +383,11 @@ impl Stages {
             let ratio = link.protocol_divisor.div_ceil(u64::from(d.divisor)) as usize;
             let up = per_device_tick(channels) * (ratio + 2) * 2;
             let mut channel_state = vec![None; channels];
+            let mut own_states = Vec::new();
             for (si, s) in sub.states.iter().enumerate() {
                 if s.device == i {
                     channel_state[s.channel] = Some(si);
+                    own_states.push(si);
                 }
             }
             let writable = sub.states.iter().any(|s| s.device == i && s.writable);
@@ -406,6 +414,7 @@ impl Stages {
                 up: Bounded::with_capacity(up),
                 updates: Bounded::with_capacity(up * channels.max(1)),
                 channel_state,
+                states: own_states,
                 safe,
                 startup: d.startup,
                 optional: d.optional,
@@ -415,6 +424,11 @@ impl Stages {
                 ever_up: false,
                 watchdog: false,
             });
+        }
+        // Replies are routed by credential with a binary search (a stable sort keeps the
+        // first-declared device first among equal credentials, as a linear search found it).
+        for l in &mut scheduled_links {
+            l.creds.sort_by_key(|&(c, _)| c);
         }
         let states = sub
             .states
@@ -456,7 +470,24 @@ impl Stages {
             counters: Counters::default(),
             events: Bounded::with_capacity(256),
             started: false,
+            profile: TickProfile::default(),
         }
+    }
+
+    /// The per-phase profile of the ticks (recording only once enabled with
+    /// [`set_profile`](Self::set_profile)).
+    pub fn profile(&self) -> &TickProfile {
+        &self.profile
+    }
+
+    /// Replaces the per-phase profile (enable it with `TickProfile::new(true)`).
+    pub fn set_profile(&mut self, profile: TickProfile) {
+        self.profile = profile;
+    }
+
+    /// The profile, for the executor's own phase boundaries.
+    pub(crate) fn profile_mut(&mut self) -> &mut TickProfile {
+        &mut self.profile
     }
 
     /// Applies every setpoint of one command frame at once (thesis `sendCtrl`): each value is
@@ -588,6 +619,7 @@ impl Stages {
             d.dev.flush(ctx, out);
             self.counters.overflows += out.overflows() - before;
         }
+        self.profile.mark(TickPhase::Down);
 
         // 4–6. Hardware in, protocol down, hardware out, protocol up.
         for li in 0..self.links.len() {
@@ -597,23 +629,32 @@ impl Stages {
             l.urgent = false;
             if hw {
                 l.link.receive(ctx);
+                self.profile.mark(TickPhase::HardwareIo);
             }
+            let l = &mut self.links[li];
             if proto {
                 l.link.encode(l.requests.as_slice(), ctx);
                 l.requests.clear();
+                self.profile.mark(TickPhase::Protocol);
             }
-            if hw && l.link.exchange(ctx).is_err() {
-                self.counters.hw_errors += 1;
+            let l = &mut self.links[li];
+            if hw {
+                if l.link.exchange(ctx).is_err() {
+                    self.counters.hw_errors += 1;
+                }
+                self.profile.mark(TickPhase::HardwareIo);
             }
             if proto {
                 self.route_replies(li, ctx);
             }
             self.watch_link(li, ctx);
+            self.profile.mark(TickPhase::Protocol);
         }
 
         // 7. Device stage, upstream.
         self.devices_up(tick, ctx);
         self.watch_devices(ctx);
+        self.profile.mark(TickPhase::DeviceUp);
 
         // 8. State stage, upstream.
         let mut n = 0;
@@ -630,6 +671,8 @@ impl Stages {
             });
             n += 1;
         }
+        self.profile.published(n);
+        self.profile.mark(TickPhase::Publish);
         n
     }
 
@@ -640,7 +683,8 @@ impl Stages {
         l.link.decode(&mut l.replies, ctx);
         self.counters.overflows += l.replies.overflows() - before;
         for r in l.replies.as_slice() {
-            match l.creds.iter().find(|(c, _)| *c == r.cred) {
+            let at = l.creds.partition_point(|(c, _)| *c < r.cred);
+            match l.creds.get(at).filter(|(c, _)| *c == r.cred) {
                 Some(&(_, di)) => {
                     if self.devices[di].up.push(*r).is_err() {
                         self.counters.overflows += 1;
@@ -790,7 +834,8 @@ impl Stages {
             let st = d.dev.status();
             let absent = matches!(st.phase, Phase::Offline | Phase::Probing | Phase::Failed);
             let watchdog = d.watchdog;
-            for s in self.states.iter_mut().filter(|s| s.device == di) {
+            for &si in &d.states {
+                let s = &mut self.states[si];
                 s.disabled = st.managed() && !st.driving();
                 s.tripped = st.tripped;
                 s.fault |= st.fault != 0;
