@@ -10,7 +10,8 @@ use std::time::Duration;
 use score_core::Real;
 use score_host::{Session, SessionError, TimeMode};
 
-use common::score;
+use common::{score, score_in};
+use conductor_testkit::run_ok;
 
 #[test]
 fn run_never_moves_the_simulated_clock_past_its_end_or_backwards() {
@@ -54,9 +55,7 @@ fn run_option_is_checked_like_the_command() {
     let dir = common::workdir("run-option");
     std::fs::write(dir.join("a.score"), "adc 0 100\n").unwrap();
     for bad in ["inf", "-5", "nan", "1e30"] {
-        let out = score()
-            .args(["-q", "--script", "a.score", "--run", bad, "--dir"])
-            .arg(&dir)
+        let out = score_in(&dir, &["-q", "--script", "a.score", "--run", bad])
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
@@ -140,12 +139,7 @@ fn a_log_of_non_finite_values_warns_and_plays_back() {
          set den 0\nrun 0.2\nset num -1\nrun 0.1\nset num 0\nrun 0.1\n",
     )
     .unwrap();
-    let out = score()
-        .args(["-q", "--script", "inf.score", "--dir"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    let out = run_ok(&mut score_in(&dir, &["-q", "--script", "inf.score"]));
     let err = String::from_utf8_lossy(&out.stderr);
     // Said once, where it first happened.
     assert_eq!(err.matches("warning: log:").count(), 1, "{err}");
@@ -178,16 +172,7 @@ fn a_log_of_non_finite_values_warns_and_plays_back() {
 fn a_script_with_a_byte_order_mark_runs_and_loads() {
     let dir = common::workdir("bom");
     std::fs::write(dir.join("bom.score"), "\u{feff}var\ndefexp k 2\n").unwrap();
-    let out = score()
-        .args(["-q", "--script", "bom.score", "--dir"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_ok(&mut score_in(&dir, &["-q", "--script", "bom.score"]));
     let mut s = Session::new(TimeMode::Simulated, &dir);
     s.line("load bom.score", &mut String::new()).unwrap();
     assert_eq!(s.engine().value_of("k"), Some(2.0));
@@ -204,9 +189,7 @@ fn a_script_with_a_byte_order_mark_runs_and_loads() {
 fn errors_of_scripts_and_piped_lines_show_the_column() {
     let dir = common::workdir("column");
     std::fs::write(dir.join("c.score"), "var\ndefexp k 2\ndefexp x k 2 $ +\n").unwrap();
-    let out = score()
-        .args(["-q", "--script", "c.score", "--dir"])
-        .arg(&dir)
+    let out = score_in(&dir, &["-q", "--script", "c.score"])
         .output()
         .unwrap();
     assert_eq!(
