@@ -199,15 +199,7 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
 
     // SIGTERM: every servo holds where it is, read back before the executor says so.
     let mut exec = exec;
-    let status = exec.stop();
-    assert!(status.success(), "{status}: {:#?}", exec.log());
-    assert!(
-        exec.log()
-            .iter()
-            .any(|l| l.contains("devices in their safe state (6 confirmed on the wire)")),
-        "{:#?}",
-        exec.log()
-    );
+    exec.stop_confirmed(6);
     {
         let s = sim.sim();
         for (id, v) in (1..=6u8).zip(targets) {

@@ -127,7 +127,7 @@ fn a_missing_servo_is_an_error_unless_optional() {
         p3.poll().is_none(),
         "no value is ever invented for an absent servo"
     );
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
     drop(sim);
 }
 
@@ -181,7 +181,7 @@ fn eeprom_is_written_with_torque_off_and_read_back_then_enabled_where_it_is() {
             assert_eq!(servo.present_position(), 2300, "enabled where it was");
         }
     }
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 #[test]
@@ -253,7 +253,7 @@ fn a_hardware_error_trips_the_servo_and_enable_reboots_it() {
     p2.until(2.0, "commands again", |s| {
         (s.value + 0.3).abs() < 4.0 * PULSE
     });
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -276,7 +276,7 @@ fn reboot_on_fault_recovers_by_itself() {
         t.elapsed()
     );
     assert_eq!(sim.sim().stats().reboot, 1);
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 #[test]
@@ -334,7 +334,7 @@ fn the_watchdog_trips_setpoints_are_refused_until_enable_from_where_it_is() {
         send(&mut ctl, &[("arm/p1", -0.5)]);
         std::thread::sleep(Duration::from_millis(50));
     }
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 /// An executor that does not run for longer than its watchdog (descheduled on a loaded machine;
@@ -382,7 +382,7 @@ fn a_hold_after_the_executor_did_not_run_holds_where_the_servo_is() {
         (goal - now).abs() <= 4 && goal >= there,
         "held at {goal} while the servo stood at {now} (at {there} when the executor came back, {before} when it stopped)"
     );
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 #[test]
@@ -431,7 +431,7 @@ fn an_unplugged_port_is_reopened_and_the_servos_resume_without_a_restart() {
     assert_eq!((st.bus_outages, st.links_down), (1, 0), "{st:?}");
     send(&mut ctl, &[("arm/p1", -0.25)]);
     p1.until(2.0, "obeys again", |s| (s.value + 0.25).abs() < 4.0 * PULSE);
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -478,7 +478,7 @@ fn hold_off_stays_limp_until_the_first_setpoint_then_moves_from_where_it_is() {
     );
     assert_eq!(goals.last(), Some(&2048), "then the setpoint: {goals:?}");
     drop(s);
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 /// Six servos on a noisy bus at `link` (1 % of the bytes damaged, half corrupted and half
@@ -511,7 +511,7 @@ fn bring_up_survives_a_noisy_bus() {
         let (r, _d) = start("noisy", &manifest(&link.display().to_string(), 6, "", ""));
         match r {
             Ok(mut exec) => {
-                assert!(exec.stop().success());
+                exec.stop_ok();
             }
             Err((status, log)) => {
                 let s = sim.sim();
