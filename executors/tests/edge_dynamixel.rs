@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use conductor_bus::{status, Bus, Controller, Domain, StatsSubscriber};
 use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
 use conductor_devices::sim::fault::FaultConfig;
-use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty, Running};
+use conductor_devices::sim::runner::{run_dxl, run_dxl_faultless, Endpoint, Pty, Running};
 use support::edge::{send, Exec, Watch};
 use support::{eventually, temp_manifest};
 
@@ -23,12 +23,7 @@ const PULSE: f64 = 2.0 * std::f64::consts::PI / 4096.0;
 /// A bus of servos `ids` on a pty (with a symlink, so it can be unplugged and plugged back).
 fn bus(tag: &str, cfg: DxlSimConfig) -> (Running<DxlBusSim>, String) {
     let link = std::env::temp_dir().join(format!("conductor-edge-{tag}-{}", std::process::id()));
-    let sim = run_dxl(
-        Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
-        cfg,
-        FaultConfig::default(),
-        FaultConfig::default(),
-    );
+    let sim = run_dxl_faultless(Endpoint::Pty(Pty::open(Some(&link)).unwrap()), cfg);
     sim.sim().start_log();
     (sim, link.display().to_string())
 }
