@@ -73,12 +73,11 @@ fn save_then_load_recreates_the_table_and_a_bad_file_changes_nothing() {
 
 #[test]
 fn script_errors_name_file_and_line() {
-    let dir = common::workdir("script-error");
-    std::fs::write(
-        dir.join("s.score"),
+    let dir = common::workdir_with(
+        "script-error",
+        "s.score",
         "var\ndefexp k 2\nadc 9 100\ndefexp never 1\n",
-    )
-    .unwrap();
+    );
     let mut s = Session::new(TimeMode::Simulated, &dir);
     let err = s.line("script s.score", &mut String::new()).unwrap_err();
     assert_eq!(
@@ -90,12 +89,11 @@ fn script_errors_name_file_and_line() {
 
 #[test]
 fn real_time_mode_updates_on_the_wall_clock() {
-    let dir = common::workdir("realtime");
-    std::fs::write(
-        dir.join("rt.score"),
+    let dir = common::workdir_with(
+        "realtime",
+        "rt.score",
         "infile x 100 100SIN.HZ\nlog x 100 rt.log\n",
-    )
-    .unwrap();
+    );
     run_ok(&mut score_in(
         &dir,
         &["--realtime", "-q", "--script", "rt.score", "--run", "0.3"],

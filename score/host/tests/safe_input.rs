@@ -52,8 +52,7 @@ fn run_never_moves_the_simulated_clock_past_its_end_or_backwards() {
 
 #[test]
 fn run_option_is_checked_like_the_command() {
-    let dir = common::workdir("run-option");
-    std::fs::write(dir.join("a.score"), "adc 0 100\n").unwrap();
+    let dir = common::workdir_with("run-option", "a.score", "adc 0 100\n");
     for bad in ["inf", "-5", "nan", "1e30"] {
         let out = score_in(&dir, &["-q", "--script", "a.score", "--run", bad])
             .output()
@@ -132,13 +131,12 @@ fn ctrl_c_stops_a_long_run_and_the_session_continues() {
 
 #[test]
 fn a_log_of_non_finite_values_warns_and_plays_back() {
-    let dir = common::workdir("nonfinite-log");
-    std::fs::write(
-        dir.join("inf.score"),
+    let dir = common::workdir_with(
+        "nonfinite-log",
+        "inf.score",
         "var\ndefexp num 1\ndefexp den 1\ndefexp x num den /\nlog x 10 x.log\nrun 0.2\n\
          set den 0\nrun 0.2\nset num -1\nrun 0.1\nset num 0\nrun 0.1\n",
-    )
-    .unwrap();
+    );
     let out = run_ok(&mut score_in(&dir, &["-q", "--script", "inf.score"]));
     let err = String::from_utf8_lossy(&out.stderr);
     // Said once, where it first happened.
@@ -170,8 +168,7 @@ fn a_log_of_non_finite_values_warns_and_plays_back() {
 
 #[test]
 fn a_script_with_a_byte_order_mark_runs_and_loads() {
-    let dir = common::workdir("bom");
-    std::fs::write(dir.join("bom.score"), "\u{feff}var\ndefexp k 2\n").unwrap();
+    let dir = common::workdir_with("bom", "bom.score", "\u{feff}var\ndefexp k 2\n");
     run_ok(&mut score_in(&dir, &["-q", "--script", "bom.score"]));
     let mut s = Session::new(TimeMode::Simulated, &dir);
     s.line("load bom.score", &mut String::new()).unwrap();
@@ -187,8 +184,7 @@ fn a_script_with_a_byte_order_mark_runs_and_loads() {
 
 #[test]
 fn errors_of_scripts_and_piped_lines_show_the_column() {
-    let dir = common::workdir("column");
-    std::fs::write(dir.join("c.score"), "var\ndefexp k 2\ndefexp x k 2 $ +\n").unwrap();
+    let dir = common::workdir_with("column", "c.score", "var\ndefexp k 2\ndefexp x k 2 $ +\n");
     let out = score_in(&dir, &["-q", "--script", "c.score"])
         .output()
         .unwrap();

@@ -55,6 +55,13 @@ pub fn workdir(tag: &str) -> PathBuf {
     dir
 }
 
+/// [`workdir`] with one more file, `name`, holding `text` (a script of the test's own).
+pub fn workdir_with(tag: &str, name: &str, text: &str) -> PathBuf {
+    let dir = workdir(tag);
+    std::fs::write(dir.join(name), text).unwrap();
+    dir
+}
+
 /// Runs a thesis script unchanged in simulated time, then advances `seconds`.
 pub fn run_script(script: &str, extra: &[&str], seconds: f64) -> (Session, PathBuf) {
     let dir = workdir(script);
