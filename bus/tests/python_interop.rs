@@ -3,9 +3,7 @@
 //! bus/ABI.md, which this test extracts from the document itself.
 
 use conductor_testkit::{python, workspace};
-use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{
@@ -76,13 +74,7 @@ fn python_subscribes_and_commands_through_the_documented_abi() {
         .stderr(Stdio::inherit())
         .spawn()
         .expect("start python");
-    let (tx, rx) = mpsc::channel();
-    let stdout = child.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(l);
-        }
-    });
+    let rx = conductor_testkit::lines_of(child.stdout.take().unwrap());
 
     // Publish the sample number at 500 Hz until Python has sent its frame and we received it.
     let mut lines = Vec::new();

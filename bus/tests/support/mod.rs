@@ -2,8 +2,7 @@
 
 #![allow(dead_code)]
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, ChildStdout, Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -26,16 +25,8 @@ impl Peer {
             .stderr(Stdio::inherit())
             .spawn()
             .expect("start conductor-bus-peer");
-        let stdout: ChildStdout = child.stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        Peer { child, lines: rx }
+        let lines = conductor_testkit::lines_of(child.stdout.take().unwrap());
+        Peer { child, lines }
     }
 
     /// The next stdout line, or panics after `secs`.

@@ -6,10 +6,9 @@
 //! Needs the firmware ELF (`score-fw build`) and the harness (`npm ci` in
 //! score/firmware/emulator); fails with a message saying how to get them.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::sync::mpsc::{channel, Receiver};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Controller, Domain, StateSample, StateSubscriber};
@@ -34,14 +33,8 @@ impl Gw {
             .stderr(Stdio::inherit())
             .spawn()
             .expect("score-gateway starts");
-        let out = child.stdout.take().unwrap();
-        let (tx, rx) = channel();
-        std::thread::spawn(move || {
-            for l in BufReader::new(out).lines().map_while(Result::ok) {
-                let _ = tx.send(l);
-            }
-        });
-        Self { child, stdout: rx }
+        let stdout = conductor_testkit::lines_of(child.stdout.take().unwrap());
+        Self { child, stdout }
     }
 
     fn ready(&self) -> String {

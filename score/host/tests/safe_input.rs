@@ -2,9 +2,8 @@
 //! a run, logs of non-finite values played back, byte-order marks, columns in script errors.
 mod common;
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
 use std::time::Duration;
 
 use score_core::Real;
@@ -83,16 +82,7 @@ fn ctrl_c_stops_a_long_run_and_the_session_continues() {
     stdin
         .write_all(b"adc 0 100\nrun 1e9\nprintv ADC0\nsim\n")
         .unwrap();
-    let (tx, rx) = mpsc::channel();
-    let stdout = BufReader::new(child.stdout.take().unwrap());
-    std::thread::spawn(move || {
-        for line in stdout.lines() {
-            let Ok(line) = line else { break };
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+    let rx = conductor_testkit::lines_of(child.stdout.take().unwrap());
     let next = |what: &str| {
         rx.recv_timeout(Duration::from_secs(60))
             .unwrap_or_else(|_| panic!("no output while waiting for {what}"))
