@@ -65,16 +65,14 @@ fn python_subscribes_and_commands_through_the_documented_abi() {
     let mut commands = CommandReceiver::create(&bus, "py").unwrap();
 
     let script = workspace().join("bus/tests/python/interop.py");
-    let mut child = Command::new(python())
-        .arg(&script)
-        .arg(&dir)
-        .arg(d.name())
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("start python");
-    let rx = conductor_testkit::lines_of(child.stdout.take().unwrap());
+    let (mut child, rx) = conductor_testkit::spawn_with_lines(
+        Command::new(python())
+            .arg(&script)
+            .arg(&dir)
+            .arg(d.name())
+            .stdin(Stdio::piped())
+            .stderr(Stdio::inherit()),
+    );
 
     // Publish the sample number at 500 Hz until Python has sent its frame and we received it.
     let mut lines = Vec::new();

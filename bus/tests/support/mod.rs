@@ -17,15 +17,13 @@ pub struct Peer {
 impl Peer {
     /// Starts `conductor-bus-peer --domain <d> <args>`.
     pub fn start(domain: &Domain, args: &[&str]) -> Peer {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_conductor-bus-peer"))
-            .arg("--domain")
-            .arg(domain.name())
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("start conductor-bus-peer");
-        let lines = conductor_testkit::lines_of(child.stdout.take().unwrap());
+        let (child, lines) = conductor_testkit::spawn_with_lines(
+            Command::new(env!("CARGO_BIN_EXE_conductor-bus-peer"))
+                .arg("--domain")
+                .arg(domain.name())
+                .args(args)
+                .stderr(Stdio::inherit()),
+        );
         Peer { child, lines }
     }
 

@@ -24,16 +24,14 @@ struct Gw {
 
 impl Gw {
     fn spawn(link: &Path, domain: &Domain, extra: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_score-gateway"))
-            .arg("--port")
-            .arg(link)
-            .args(extra)
-            .env("CONDUCTOR_DOMAIN", domain.name())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("score-gateway starts");
-        let stdout = conductor_testkit::lines_of(child.stdout.take().unwrap());
+        let (child, stdout) = conductor_testkit::spawn_with_lines(
+            Command::new(env!("CARGO_BIN_EXE_score-gateway"))
+                .arg("--port")
+                .arg(link)
+                .args(extra)
+                .env("CONDUCTOR_DOMAIN", domain.name())
+                .stderr(Stdio::inherit()),
+        );
         Self { child, stdout }
     }
 

@@ -71,18 +71,16 @@ fn run_option_is_checked_like_the_command() {
 /// with the next line. (A 100 Hz variable and `run 1e9`: 10¹¹ updates, hours of CPU.)
 #[test]
 fn ctrl_c_stops_a_long_run_and_the_session_continues() {
-    let mut child = score()
-        .args(["--simulated"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let (mut child, rx) = conductor_testkit::spawn_with_lines(
+        score()
+            .args(["--simulated"])
+            .stdin(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
     let mut stdin = child.stdin.take().unwrap();
     stdin
         .write_all(b"adc 0 100\nrun 1e9\nprintv ADC0\nsim\n")
         .unwrap();
-    let rx = conductor_testkit::lines_of(child.stdout.take().unwrap());
     let next = |what: &str| {
         rx.recv_timeout(Duration::from_secs(60))
             .unwrap_or_else(|_| panic!("no output while waiting for {what}"))
