@@ -3,9 +3,7 @@
 //! bus/ABI.md, which this test extracts from the document itself.
 
 use conductor_testkit::{python, workspace};
-use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{
@@ -67,22 +65,14 @@ fn python_subscribes_and_commands_through_the_documented_abi() {
     let mut commands = CommandReceiver::create(&bus, "py").unwrap();
 
     let script = workspace().join("bus/tests/python/interop.py");
-    let mut child = Command::new(python())
-        .arg(&script)
-        .arg(&dir)
-        .arg(d.name())
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .expect("start python");
-    let (tx, rx) = mpsc::channel();
-    let stdout = child.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(l);
-        }
-    });
+    let (mut child, rx) = conductor_testkit::spawn_with_lines(
+        Command::new(python())
+            .arg(&script)
+            .arg(&dir)
+            .arg(d.name())
+            .stdin(Stdio::piped())
+            .stderr(Stdio::inherit()),
+    );
 
     // Publish the sample number at 500 Hz until Python has sent its frame and we received it.
     let mut lines = Vec::new();

@@ -9,8 +9,7 @@ use std::process::Command;
 use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim, OdriveAxisSim};
 use conductor_devices::sim::dxl::DxlSimConfig;
-use conductor_devices::sim::fault::FaultConfig;
-use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty};
+use conductor_devices::sim::runner::{run_dxl_faultless, run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_protocols::slcan::Dialect;
 
@@ -45,12 +44,7 @@ fn dynamixel_sdk_pings_reads_writes_sync_writes_and_sync_reads_the_simulator() {
         initial_position: 2100,
         ..DxlSimConfig::default()
     };
-    let sim = run_dxl(
-        Endpoint::Pty(pty),
-        cfg,
-        FaultConfig::default(),
-        FaultConfig::default(),
-    );
+    let sim = run_dxl_faultless(Endpoint::Pty(pty), cfg);
     sim.sim().start_log();
     let json = run_script("dxl_sdk_client.py", &[&path, "1,2,3,4,5,6"]);
     assert_eq!(field(&json, "ping_model"), "1020");

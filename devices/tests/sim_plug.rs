@@ -17,8 +17,7 @@ use common::read_lines;
 use conductor_devices::protocol_stage::mit_limits;
 use conductor_devices::sim::can_motors::{CanNode, MitMotorSim};
 use conductor_devices::sim::dxl::DxlSimConfig;
-use conductor_devices::sim::fault::FaultConfig;
-use conductor_devices::sim::runner::{run_dxl, run_slcan, Endpoint, Pty};
+use conductor_devices::sim::runner::{run_dxl_faultless, run_slcan, Endpoint, Pty};
 use conductor_devices::sim::slcan_adapter::SlcanAdapterSim;
 use conductor_protocols::dynamixel2::{self as dxl, Scanner, Status};
 use conductor_protocols::slcan::Dialect;
@@ -81,15 +80,13 @@ fn assert_hung_up(port: &TTYPort) {
 #[test]
 fn dynamixel_unplugged_and_replugged_at_the_same_path_keeps_the_servos_state() {
     let path = link("dxl");
-    let sim = run_dxl(
+    let sim = run_dxl_faultless(
         Endpoint::Pty(Pty::open(Some(&path)).unwrap()),
         DxlSimConfig {
             ids: vec![1, 2],
             tau_s: 0.0,
             ..DxlSimConfig::default()
         },
-        FaultConfig::default(),
-        FaultConfig::default(),
     );
     assert!(sim.is_plugged());
     assert_eq!(sim.link(), Some(path.as_path()));

@@ -291,11 +291,10 @@ fn slcan_process_with_three_mit_motors() {
 fn dynamixel_over_udp() {
     use conductor_devices::hw::UdpHardware;
     use conductor_devices::sim::dxl::DxlSimConfig;
-    use conductor_devices::sim::fault::FaultConfig;
-    use conductor_devices::sim::runner::{run_dxl, Endpoint};
+    use conductor_devices::sim::runner::{run_dxl_faultless, Endpoint};
 
     let ep = Endpoint::udp("127.0.0.1:0".parse().unwrap()).unwrap();
-    let sim = run_dxl(
+    let sim = run_dxl_faultless(
         ep,
         DxlSimConfig {
             ids: vec![1, 2, 3],
@@ -304,8 +303,6 @@ fn dynamixel_over_udp() {
             torque_on: true,
             ..DxlSimConfig::default()
         },
-        FaultConfig::default(),
-        FaultConfig::default(),
     );
     let peer = sim.endpoint().parse().unwrap();
     let hw = UdpHardware::open("127.0.0.1:0".parse().unwrap(), peer).unwrap();

@@ -17,3 +17,18 @@
 pub mod minihubo;
 pub mod motor;
 pub mod sim;
+
+/// How an example program ends: success, or `name: error` on stderr and a failure status.
+/// Every example binary's `main` ends through this.
+pub fn exit_code<E: std::fmt::Display>(
+    name: &str,
+    result: Result<(), E>,
+) -> std::process::ExitCode {
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{name}: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

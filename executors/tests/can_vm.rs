@@ -429,14 +429,7 @@ fn mit_and_odrive_over_socketcan() {
     for w in &mut watches {
         w.poll();
     }
-    let status = exec.stop();
-    let log = exec.log();
-    assert!(status.success(), "{status}: {log:#?}");
-    assert!(
-        log.iter()
-            .any(|l| l.contains("devices in their safe state (4 confirmed on the wire)")),
-        "{log:#?}"
-    );
+    exec.stop_confirmed(4);
     std::thread::sleep(Duration::from_millis(300));
     for i in 0..4 {
         assert!(!sim.snapshot(i).enabled, "node {i} off after the stop");
@@ -744,14 +737,7 @@ fn slcan_through_the_kernel() {
         assert!(l.contains(want), "transition {k} is not {want:?}: {tx:#?}");
     }
     drop(feeder);
-    let status = exec.stop();
-    let log = exec.log();
-    assert!(status.success(), "{status}: {log:#?}");
-    assert!(
-        log.iter()
-            .any(|l| l.contains("devices in their safe state (3 confirmed on the wire)")),
-        "{log:#?}"
-    );
+    exec.stop_confirmed(3);
     std::thread::sleep(Duration::from_millis(300));
     for i in 0..3 {
         assert!(

@@ -18,8 +18,7 @@ use std::time::{Duration, Instant};
 
 use conductor_bus::{Bus, Controller, Domain, StateSubscriber};
 use conductor_devices::sim::dxl::DxlSimConfig;
-use conductor_devices::sim::fault::FaultConfig;
-use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty};
+use conductor_devices::sim::runner::{run_dxl_faultless, Endpoint, Pty};
 use support::edge::{shipped, Exec};
 
 const JOINTS: [&str; 6] = ["RHY", "RHR", "RHP", "RKP", "RAP", "RAR"];
@@ -36,12 +35,7 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
     let port = pty.path().to_string();
     let cfg = DxlSimConfig::default();
     assert!(!cfg.torque_on, "the simulator powers up like the hardware");
-    let sim = run_dxl(
-        Endpoint::Pty(pty),
-        cfg,
-        FaultConfig::default(),
-        FaultConfig::default(),
-    );
+    let sim = run_dxl_faultless(Endpoint::Pty(pty), cfg);
     sim.sim().start_log();
 
     // The shipped manifest; only the hardware's port changes (to this test's pty).
@@ -199,15 +193,7 @@ fn minihubo_leg_on_the_dynamixel_simulator() {
 
     // SIGTERM: every servo holds where it is, read back before the executor says so.
     let mut exec = exec;
-    let status = exec.stop();
-    assert!(status.success(), "{status}: {:#?}", exec.log());
-    assert!(
-        exec.log()
-            .iter()
-            .any(|l| l.contains("devices in their safe state (6 confirmed on the wire)")),
-        "{:#?}",
-        exec.log()
-    );
+    exec.stop_confirmed(6);
     {
         let s = sim.sim();
         for (id, v) in (1..=6u8).zip(targets) {

@@ -116,15 +116,7 @@ fn a_stop_through_a_lagging_adapter_is_confirmed_on_the_wire() {
         );
         std::thread::sleep(Duration::from_millis(20));
     }
-    let status = exec.stop();
-    assert!(status.success(), "{status}: {:#?}", exec.log());
-    assert!(
-        exec.log()
-            .iter()
-            .any(|l| l.contains("devices in their safe state (3 confirmed on the wire)")),
-        "{:#?}",
-        exec.log()
-    );
+    exec.stop_confirmed(3);
     std::thread::sleep(Duration::from_millis(100));
     for i in 0..3 {
         assert!(!node(&sim, i).enabled, "motor {} out of motor mode", i + 1);
@@ -204,7 +196,7 @@ fn a_tripped_motor_refuses_setpoints_and_is_enabled_again_from_where_it_is() {
     }
     let now = node(&sim, 0).position;
     assert!((now - here).abs() < 0.01, "moved on enable: {here} → {now}");
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -236,7 +228,7 @@ fn a_motor_fault_trips_it_and_is_reported_once() {
         1,
         "once per transition"
     );
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -258,7 +250,7 @@ fn a_garbled_reply_line_publishes_nothing() {
     for s in &p1.all {
         assert!(s.value.abs() < 0.01, "a wrong value was published: {s:?}");
     }
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 /// Least squares fit of value = a + b·t (t in s).
@@ -352,7 +344,7 @@ fn after_a_stalled_adapter_every_sample_keeps_its_true_time() {
     let mut stats = StatsSubscriber::new(&bus, "leg").unwrap();
     let st = eventually(2, "stats", || stats.latest().unwrap());
     assert!(st.late_replies > 0, "{st:?}");
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -397,7 +389,7 @@ fn an_adapter_that_never_acknowledges_keeps_one_frame_per_motor_per_tick() {
         st.bus_errors >= 8,
         "the missing acknowledgements are counted: {st:?}"
     );
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -420,11 +412,7 @@ fn an_odrive_axis_is_brought_to_closed_loop_where_it_is_and_idled_at_stop() {
     let mut p = Watch::new(&bus, "leg/p");
     send(&mut ctl, &[("leg/p", 1.0)]);
     p.until(2.0, "moved", |s| (s.value - 1.0).abs() < 0.01);
-    assert!(exec.stop().success(), "{:#?}", exec.log());
-    assert!(exec
-        .log()
-        .iter()
-        .any(|l| l.contains("(1 confirmed on the wire)")));
+    exec.stop_confirmed(1);
     assert!(!node(&sim, 0).enabled, "idle after the stop");
 }
 
@@ -455,7 +443,7 @@ fn the_adapter_unplugged_and_plugged_back_resumes_without_a_restart() {
     assert!(node(&sim, 0).enabled);
     send(&mut ctl, &[("leg/p1", -0.5)]);
     p1.until(2.0, "obeys again", |s| (s.value + 0.5).abs() < 0.01);
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -483,11 +471,7 @@ fn damp_keeps_motor_mode_with_no_stiffness_after_a_trip() {
     send(&mut ctl, &[("leg/p1", -0.3)]);
     p1.until(1.0, "refused", |s| s.status & status::REJECTED != 0);
     // A stop carries out the declared action too: damping, confirmed by the motor's answer.
-    assert!(exec.stop().success(), "{:#?}", exec.log());
-    assert!(exec
-        .log()
-        .iter()
-        .any(|l| l.contains("(1 confirmed on the wire)")));
+    exec.stop_confirmed(1);
     assert!(node(&sim, 0).enabled, "damping after the stop, as declared");
 }
 
@@ -557,15 +541,7 @@ fn a_cubemars_ak70_10_reaches_its_setpoint_is_bounded_by_its_model_and_stops_on_
     assert_eq!(torque_sent(100.0), limits.t.max);
     assert_eq!(torque_sent(-100.0), limits.t.min);
 
-    let status = exec.stop();
-    assert!(status.success(), "{status}: {:#?}", exec.log());
-    assert!(
-        exec.log()
-            .iter()
-            .any(|l| l.contains("devices in their safe state (1 confirmed on the wire)")),
-        "{:#?}",
-        exec.log()
-    );
+    exec.stop_confirmed(1);
     std::thread::sleep(Duration::from_millis(100));
     assert!(!node(&sim, 0).enabled, "out of motor mode");
     let to_it = frames_to(&sim, 1);

@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 use conductor_bus::{status, Bus, Controller, Domain, StatsSubscriber};
 use conductor_devices::sim::dxl::{DxlBusSim, DxlSimConfig};
 use conductor_devices::sim::fault::FaultConfig;
-use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty, Running};
+use conductor_devices::sim::runner::{run_dxl, run_dxl_faultless, Endpoint, Pty, Running};
 use support::edge::{send, Exec, Watch};
 use support::{eventually, temp_manifest};
 
@@ -23,12 +23,7 @@ const PULSE: f64 = 2.0 * std::f64::consts::PI / 4096.0;
 /// A bus of servos `ids` on a pty (with a symlink, so it can be unplugged and plugged back).
 fn bus(tag: &str, cfg: DxlSimConfig) -> (Running<DxlBusSim>, String) {
     let link = std::env::temp_dir().join(format!("conductor-edge-{tag}-{}", std::process::id()));
-    let sim = run_dxl(
-        Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
-        cfg,
-        FaultConfig::default(),
-        FaultConfig::default(),
-    );
+    let sim = run_dxl_faultless(Endpoint::Pty(Pty::open(Some(&link)).unwrap()), cfg);
     sim.sim().start_log();
     (sim, link.display().to_string())
 }
@@ -127,7 +122,7 @@ fn a_missing_servo_is_an_error_unless_optional() {
         p3.poll().is_none(),
         "no value is ever invented for an absent servo"
     );
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
     drop(sim);
 }
 
@@ -213,7 +208,7 @@ fn eeprom_is_written_with_torque_off_and_read_back_then_enabled_where_it_is() {
             assert_eq!(servo.present_position(), 2300, "enabled where it was");
         }
     }
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 #[test]
@@ -285,7 +280,7 @@ fn a_hardware_error_trips_the_servo_and_enable_reboots_it() {
     p2.until(2.0, "commands again", |s| {
         (s.value + 0.3).abs() < 4.0 * PULSE
     });
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -308,7 +303,7 @@ fn reboot_on_fault_recovers_by_itself() {
         t.elapsed()
     );
     assert_eq!(sim.sim().stats().reboot, 1);
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 #[test]
@@ -366,7 +361,7 @@ fn the_watchdog_trips_setpoints_are_refused_until_enable_from_where_it_is() {
         send(&mut ctl, &[("arm/p1", -0.5)]);
         std::thread::sleep(Duration::from_millis(50));
     }
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 /// An enable asked for just before the command source fell silent, and finished only after
@@ -452,7 +447,7 @@ fn a_hold_after_the_executor_did_not_run_holds_where_the_servo_is() {
         (goal - now).abs() <= 4 && goal >= there,
         "held at {goal} while the servo stood at {now} (at {there} when the executor came back, {before} when it stopped)"
     );
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 #[test]
@@ -501,7 +496,7 @@ fn an_unplugged_port_is_reopened_and_the_servos_resume_without_a_restart() {
     assert_eq!((st.bus_outages, st.links_down), (1, 0), "{st:?}");
     send(&mut ctl, &[("arm/p1", -0.25)]);
     p1.until(2.0, "obeys again", |s| (s.value + 0.25).abs() < 4.0 * PULSE);
-    assert!(exec.stop().success(), "{:#?}", exec.log());
+    exec.stop_ok();
 }
 
 #[test]
@@ -548,7 +543,7 @@ fn hold_off_stays_limp_until_the_first_setpoint_then_moves_from_where_it_is() {
     );
     assert_eq!(goals.last(), Some(&2048), "then the setpoint: {goals:?}");
     drop(s);
-    assert!(exec.stop().success());
+    exec.stop_ok();
 }
 
 /// Six servos on a noisy bus at `link` (1 % of the bytes damaged, half corrupted and half
@@ -581,7 +576,7 @@ fn bring_up_survives_a_noisy_bus() {
         let (r, _d) = start("noisy", &manifest(&link.display().to_string(), 6, "", ""));
         match r {
             Ok(mut exec) => {
-                assert!(exec.stop().success());
+                exec.stop_ok();
             }
             Err((status, log)) => {
                 let s = sim.sim();

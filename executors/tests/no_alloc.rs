@@ -180,18 +180,15 @@ fn last_status(sub: &mut StateSubscriber) -> u32 {
 #[test]
 fn a_vanishing_bus_and_a_new_bring_up_allocate_nothing() {
     use conductor_devices::sim::dxl::DxlSimConfig;
-    use conductor_devices::sim::fault::FaultConfig;
-    use conductor_devices::sim::runner::{run_dxl, Endpoint, Pty};
+    use conductor_devices::sim::runner::{run_dxl_faultless, Endpoint, Pty};
 
     let link = std::env::temp_dir().join(format!("conductor-noalloc-{}", std::process::id()));
-    let sim = run_dxl(
+    let sim = run_dxl_faultless(
         Endpoint::Pty(Pty::open(Some(&link)).unwrap()),
         DxlSimConfig {
             ids: vec![1, 2],
             ..DxlSimConfig::default()
         },
-        FaultConfig::default(),
-        FaultConfig::default(),
     );
     let mut text = format!(
         "system = \"na\"\n[subsystems.arm]\nrate_hz = 200\nwatchdog_ms = 100\n\
@@ -320,17 +317,14 @@ fn udp_socket_connected_to(peer: std::net::SocketAddr) -> std::os::fd::RawFd {
 #[test]
 fn a_udp_bus_refusing_every_send_allocates_nothing() {
     use conductor_devices::sim::dxl::DxlSimConfig;
-    use conductor_devices::sim::fault::FaultConfig;
-    use conductor_devices::sim::runner::{run_dxl, Endpoint};
+    use conductor_devices::sim::runner::{run_dxl_faultless, Endpoint};
 
-    let sim = run_dxl(
+    let sim = run_dxl_faultless(
         Endpoint::udp("127.0.0.1:0".parse().unwrap()).unwrap(),
         DxlSimConfig {
             ids: vec![1, 2],
             ..DxlSimConfig::default()
         },
-        FaultConfig::default(),
-        FaultConfig::default(),
     );
     let sim_addr: std::net::SocketAddr = sim.endpoint().parse().unwrap();
     let mut text = format!(

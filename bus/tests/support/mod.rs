@@ -2,8 +2,7 @@
 
 #![allow(dead_code)]
 
-use std::io::{BufRead, BufReader};
-use std::process::{Child, ChildStdout, Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -18,24 +17,14 @@ pub struct Peer {
 impl Peer {
     /// Starts `conductor-bus-peer --domain <d> <args>`.
     pub fn start(domain: &Domain, args: &[&str]) -> Peer {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_conductor-bus-peer"))
-            .arg("--domain")
-            .arg(domain.name())
-            .args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("start conductor-bus-peer");
-        let stdout: ChildStdout = child.stdout.take().unwrap();
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-                if tx.send(line).is_err() {
-                    break;
-                }
-            }
-        });
-        Peer { child, lines: rx }
+        let (child, lines) = conductor_testkit::spawn_with_lines(
+            Command::new(env!("CARGO_BIN_EXE_conductor-bus-peer"))
+                .arg("--domain")
+                .arg(domain.name())
+                .args(args)
+                .stderr(Stdio::inherit()),
+        );
+        Peer { child, lines }
     }
 
     /// The next stdout line, or panics after `secs`.

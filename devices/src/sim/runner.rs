@@ -529,6 +529,11 @@ pub fn run_dxl(
     })
 }
 
+/// [`run_dxl`] with no faults injected either way: a clean bus of `cfg`'s servos.
+pub fn run_dxl_faultless(ep: Endpoint, cfg: DxlSimConfig) -> Running<DxlBusSim> {
+    run_dxl(ep, cfg, FaultConfig::default(), FaultConfig::default())
+}
+
 /// Runs an SLCAN adapter on `ep`: answers as soon as the adapter has them (at once, or after
 /// its latency or stall, to within about 0.1 ms), cyclic node messages at least every
 /// millisecond.

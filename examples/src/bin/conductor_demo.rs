@@ -47,14 +47,7 @@ fn main() -> ExitCode {
         args.remove(1);
         return process::main_with_args(args);
     }
-    let cli = Cli::parse_from(args);
-    match run(&cli) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("conductor-demo: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    conductor_examples::exit_code("conductor-demo", run(&Cli::parse_from(args)))
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]

@@ -92,11 +92,5 @@ fn run(args: &Args) -> Result<(), BusError> {
 }
 
 fn main() -> ExitCode {
-    match run(&Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("pid-controller: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    conductor_examples::exit_code("pid-controller", run(&Args::parse()))
 }

@@ -29,19 +29,11 @@ struct Args {
     tau: f64,
 }
 
-fn main() -> ExitCode {
-    let args = Args::parse();
-    let domain = match args
+fn run(args: &Args) -> Result<(), sim::SimError> {
+    let domain = args
         .domain
         .as_deref()
-        .map_or_else(Domain::from_env, Domain::new)
-    {
-        Ok(d) => d,
-        Err(e) => {
-            eprintln!("sim-motor: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
+        .map_or_else(Domain::from_env, Domain::new)?;
     let stop = Arc::new(AtomicBool::new(false));
     if let Some(secs) = args.seconds {
         let stop = stop.clone();
@@ -55,20 +47,16 @@ fn main() -> ExitCode {
         tau: args.tau,
     };
     let spec = motor::spec(args.rate);
-    let r = sim::run(&domain, &spec, &mut plant, &stop, || {
+    let rep = sim::run(&domain, &spec, &mut plant, &stop, || {
         println!("READY domain={}", domain.name());
-    });
-    match r {
-        Ok(rep) => {
-            println!(
-                "ticks {} frames {} rejected {} clamped {}",
-                rep.ticks, rep.frames, rep.rejected, rep.clamped
-            );
-            ExitCode::SUCCESS
-        }
-        Err(e) => {
-            eprintln!("sim-motor: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    })?;
+    println!(
+        "ticks {} frames {} rejected {} clamped {}",
+        rep.ticks, rep.frames, rep.rejected, rep.clamped
+    );
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    conductor_examples::exit_code("sim-motor", run(&Args::parse()))
 }

@@ -160,11 +160,5 @@ fn run(args: &Args) -> Result<(), BusError> {
 }
 
 fn main() -> ExitCode {
-    match run(&Args::parse()) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("state-observer: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    conductor_examples::exit_code("state-observer", run(&Args::parse()))
 }

@@ -117,6 +117,25 @@ impl Exec {
         s
     }
 
+    /// SIGTERM; it must exit with success (every safe action confirmed). Returns its log.
+    pub fn stop_ok(&mut self) -> Vec<String> {
+        let status = self.stop();
+        let log = self.log();
+        assert!(status.success(), "{status}: {log:#?}");
+        log
+    }
+
+    /// SIGTERM; it must exit with success, saying that `n` devices were confirmed in their
+    /// safe state on the wire.
+    pub fn stop_confirmed(&mut self, n: usize) {
+        let log = self.stop_ok();
+        let want = format!("devices in their safe state ({n} confirmed on the wire)");
+        assert!(
+            log.iter().any(|l| l.contains(&want)),
+            "no {want:?}: {log:#?}"
+        );
+    }
+
     /// Every stderr line so far.
     pub fn log(&self) -> Vec<String> {
         self.lines.lock().unwrap().clone()

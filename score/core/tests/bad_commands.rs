@@ -2,7 +2,7 @@
 //! menu, the expression arena, the schedule) exactly as it was.
 mod common;
 
-use common::{board, run};
+use common::{board, refused, run};
 use score_core::{Engine, Num};
 
 const SETUP: &str = "adc 0 100\nadc A 1000\npwm 4 1000 50\nvar\ndefexp Kp 21\ndefexp a b 1 +\n\
@@ -102,11 +102,8 @@ fn full_table_is_refused_without_partial_changes() {
     }
     let before = e.clone();
     // Needs the target and two placeholders: only one slot is left.
-    let err = e
-        .execute("defexp z p q +", &mut b, &mut String::new())
-        .unwrap_err();
     assert_eq!(
-        err.to_string(),
+        refused(&mut e, &mut b, "defexp z p q +"),
         "defexp: no room: variables (capacity 64; see 'capacities')"
     );
     assert_eq!(e, before);

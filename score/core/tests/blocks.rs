@@ -2,7 +2,7 @@
 //! static placement the firmware needs.
 mod common;
 
-use common::{board, run, run_until};
+use common::{board, refused, run, run_until};
 use score_core::{Engine, Num, Real, VarKind};
 
 // A firmware keeps the engine in a static: `new` must be usable in a const context.
@@ -93,11 +93,8 @@ fn gpio_and_temperature_channels() {
     );
     let kinds: Vec<VarKind> = e.vars().map(|v| v.kind).collect();
     assert!(kinds.contains(&VarKind::GpioIn) && kinds.contains(&VarKind::GpioOut));
-    let err = e
-        .execute("gpio 5 10", &mut b, &mut String::new())
-        .unwrap_err();
     assert_eq!(
-        err.to_string(),
+        refused(&mut e, &mut b, "gpio 5 10"),
         "gpio: '5' is already driven by 'led' ('del led' first)"
     );
 }

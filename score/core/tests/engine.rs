@@ -1,7 +1,7 @@
 //! Behaviour of the command language and the scheduler.
 mod common;
 
-use common::{board, run, run_until, MemBoard};
+use common::{board, refused, run, run_until, MemBoard};
 use score_core::{Engine, Error, Num, VarKind};
 
 fn engine() -> (Engine<Num>, MemBoard) {
@@ -87,10 +87,8 @@ fn del_is_refused_with_the_list_of_users() {
         "adc 0 100\ndefint I adc0 100\ndefexp P adc0 2 *\ndefexp Q P 1 +",
     );
     let before = e.clone();
-    let mut out = String::new();
-    let err = e.execute("del adc0", &mut b, &mut out).unwrap_err();
     assert_eq!(
-        err.to_string(),
+        refused(&mut e, &mut b, "del adc0"),
         "del: cannot delete 'adc0': it is used by I, P (delete or redefine those first)"
     );
     assert_eq!(e, before);
@@ -109,11 +107,8 @@ fn set_changes_constants_and_refuses_computed_values() {
     run(&mut e, &mut b, "set Kp 3\nset PWM2 40");
     assert_eq!(e.value_of("u"), Some(6.0));
     assert!((b.hw.duty[2] - 0.4).abs() < 1e-6);
-    let err = e
-        .execute("set u 1", &mut b, &mut String::new())
-        .unwrap_err();
     assert_eq!(
-        err.to_string(),
+        refused(&mut e, &mut b, "set u 1"),
         "set: 'u' is an expression and cannot be set (constants, pwm duties and integrators can)"
     );
     let info = e.info(e.lookup("Kp").unwrap()).unwrap();
@@ -241,24 +236,16 @@ fn rate_changes_the_update_frequency() {
     let t0 = e.next_deadline().unwrap();
     e.tick(t0, &mut b);
     assert_eq!(e.next_deadline(), Some(t0 + 10_000));
-    let err = e
-        .execute("rate one 5", &mut b, &mut String::new())
-        .unwrap_err();
-    assert!(
-        err.to_string().contains("'one' is not a periodic variable"),
-        "{err}"
-    );
+    let err = refused(&mut e, &mut b, "rate one 5");
+    assert!(err.contains("'one' is not a periodic variable"), "{err}");
 }
 
 #[test]
 fn pwm_outputs_belong_to_one_variable() {
     let (mut e, mut b) = engine();
     run(&mut e, &mut b, "defexp x 50\ndefpwm pw2 x 100 2 1000");
-    let err = e
-        .execute("pwm B 250 25", &mut b, &mut String::new())
-        .unwrap_err();
     assert_eq!(
-        err.to_string(),
+        refused(&mut e, &mut b, "pwm B 250 25"),
         "pwm: 'B' is already driven by 'pw2' ('del pw2' first)"
     );
     run_until(&mut e, &mut b, 1);
@@ -299,11 +286,8 @@ fn the_expression_capacity_counts_tokens_as_typed() {
         "{out}"
     );
     let before = e.clone();
-    let err = e
-        .execute("defexp z k abs", &mut b, &mut String::new())
-        .unwrap_err();
     assert_eq!(
-        err.to_string(),
+        refused(&mut e, &mut b, "defexp z k abs"),
         format!("defexp: no room: expression tokens (capacity {cap}; see 'capacities')")
     );
     assert_eq!(e, before);

@@ -4,7 +4,7 @@
 //! used before its definition is pointed out.
 mod common;
 
-use common::{board, run, run_until, MemBoard};
+use common::{board, refused, run, run_until, MemBoard};
 use score_core::{Engine, Error, Num, Outcome, Real};
 
 /// `x = num / den`, an input that the test makes finite, infinite or NaN with `set`.
@@ -173,16 +173,12 @@ fn a_byte_order_mark_is_not_part_of_the_command() {
 fn invisible_characters_are_shown_in_messages() {
     let mut e: Engine<Num> = Engine::new();
     let mut b = board();
-    let mut out = String::new();
-    let err = e
-        .execute("def\u{200b}exp k 2", &mut b, &mut out)
-        .unwrap_err();
     assert_eq!(
-        err.to_string(),
+        refused(&mut e, &mut b, "def\u{200b}exp k 2"),
         "unknown command 'def\\u{200b}exp' (type 'help' for the list of commands)"
     );
-    let err = e.execute("defexp k 2 \u{7}", &mut b, &mut out).unwrap_err();
-    assert!(err.to_string().contains("at '\\u{7}'"), "{err}");
+    let err = refused(&mut e, &mut b, "defexp k 2 \u{7}");
+    assert!(err.contains("at '\\u{7}'"), "{err}");
 }
 
 #[test]

@@ -6,10 +6,9 @@
 //! Needs the firmware ELF (`score-fw build`) and the harness (`npm ci` in
 //! score/firmware/emulator); fails with a message saying how to get them.
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::sync::mpsc::{channel, Receiver};
+use std::sync::mpsc::Receiver;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Controller, Domain, StateSample, StateSubscriber};
@@ -25,23 +24,15 @@ struct Gw {
 
 impl Gw {
     fn spawn(link: &Path, domain: &Domain, extra: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_score-gateway"))
-            .arg("--port")
-            .arg(link)
-            .args(extra)
-            .env("CONDUCTOR_DOMAIN", domain.name())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .expect("score-gateway starts");
-        let out = child.stdout.take().unwrap();
-        let (tx, rx) = channel();
-        std::thread::spawn(move || {
-            for l in BufReader::new(out).lines().map_while(Result::ok) {
-                let _ = tx.send(l);
-            }
-        });
-        Self { child, stdout: rx }
+        let (child, stdout) = conductor_testkit::spawn_with_lines(
+            Command::new(env!("CARGO_BIN_EXE_score-gateway"))
+                .arg("--port")
+                .arg(link)
+                .args(extra)
+                .env("CONDUCTOR_DOMAIN", domain.name())
+                .stderr(Stdio::inherit()),
+        );
+        Self { child, stdout }
     }
 
     fn ready(&self) -> String {

@@ -3,7 +3,8 @@ mod common;
 
 use score_host::{Session, TimeMode};
 
-use common::score;
+use common::score_in;
+use conductor_testkit::run_ok;
 
 #[test]
 fn every_thesis_script_runs_unchanged_in_batch_mode() {
@@ -16,16 +17,7 @@ fn every_thesis_script_runs_unchanged_in_batch_mode() {
     scripts.sort();
     assert_eq!(scripts.len(), 6, "{scripts:?}"); // Fig. 4.5, 5.4, 5.13 a and b, 5.15, 5.20
     for s in &scripts {
-        let out = score()
-            .args(["--script", s, "--run", "2", "--dir"])
-            .arg(&dir)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{s}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        let out = run_ok(&mut score_in(&dir, &["--script", s, "--run", "2"]));
         let text = String::from_utf8_lossy(&out.stdout);
         assert!(
             text.starts_with("$> var"),
@@ -81,12 +73,11 @@ fn save_then_load_recreates_the_table_and_a_bad_file_changes_nothing() {
 
 #[test]
 fn script_errors_name_file_and_line() {
-    let dir = common::workdir("script-error");
-    std::fs::write(
-        dir.join("s.score"),
+    let dir = common::workdir_with(
+        "script-error",
+        "s.score",
         "var\ndefexp k 2\nadc 9 100\ndefexp never 1\n",
-    )
-    .unwrap();
+    );
     let mut s = Session::new(TimeMode::Simulated, &dir);
     let err = s.line("script s.score", &mut String::new()).unwrap_err();
     assert_eq!(
@@ -98,26 +89,15 @@ fn script_errors_name_file_and_line() {
 
 #[test]
 fn real_time_mode_updates_on_the_wall_clock() {
-    let dir = common::workdir("realtime");
-    std::fs::write(
-        dir.join("rt.score"),
+    let dir = common::workdir_with(
+        "realtime",
+        "rt.score",
         "infile x 100 100SIN.HZ\nlog x 100 rt.log\n",
-    )
-    .unwrap();
-    let out = score()
-        .args([
-            "--realtime",
-            "-q",
-            "--script",
-            "rt.score",
-            "--run",
-            "0.3",
-            "--dir",
-        ])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    );
+    run_ok(&mut score_in(
+        &dir,
+        &["--realtime", "-q", "--script", "rt.score", "--run", "0.3"],
+    ));
     // 100 Hz for 0.3 s of wall time: 30 updates when on time; a slow machine skips (and counts)
     // late ones instead of bursting, so fewer, never more than 31.
     let n = common::numbers(&dir.join("rt.log")).len();

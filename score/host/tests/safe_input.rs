@@ -2,15 +2,15 @@
 //! a run, logs of non-finite values played back, byte-order marks, columns in script errors.
 mod common;
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::process::{Command, Stdio};
-use std::sync::mpsc;
 use std::time::Duration;
 
 use score_core::Real;
 use score_host::{Session, SessionError, TimeMode};
 
-use common::score;
+use common::{score, score_in};
+use conductor_testkit::run_ok;
 
 #[test]
 fn run_never_moves_the_simulated_clock_past_its_end_or_backwards() {
@@ -51,12 +51,9 @@ fn run_never_moves_the_simulated_clock_past_its_end_or_backwards() {
 
 #[test]
 fn run_option_is_checked_like_the_command() {
-    let dir = common::workdir("run-option");
-    std::fs::write(dir.join("a.score"), "adc 0 100\n").unwrap();
+    let dir = common::workdir_with("run-option", "a.score", "adc 0 100\n");
     for bad in ["inf", "-5", "nan", "1e30"] {
-        let out = score()
-            .args(["-q", "--script", "a.score", "--run", bad, "--dir"])
-            .arg(&dir)
+        let out = score_in(&dir, &["-q", "--script", "a.score", "--run", bad])
             .output()
             .unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
@@ -74,27 +71,16 @@ fn run_option_is_checked_like_the_command() {
 /// with the next line. (A 100 Hz variable and `run 1e9`: 10¹¹ updates, hours of CPU.)
 #[test]
 fn ctrl_c_stops_a_long_run_and_the_session_continues() {
-    let mut child = score()
-        .args(["--simulated"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let (mut child, rx) = conductor_testkit::spawn_with_lines(
+        score()
+            .args(["--simulated"])
+            .stdin(Stdio::piped())
+            .stderr(Stdio::piped()),
+    );
     let mut stdin = child.stdin.take().unwrap();
     stdin
         .write_all(b"adc 0 100\nrun 1e9\nprintv ADC0\nsim\n")
         .unwrap();
-    let (tx, rx) = mpsc::channel();
-    let stdout = BufReader::new(child.stdout.take().unwrap());
-    std::thread::spawn(move || {
-        for line in stdout.lines() {
-            let Ok(line) = line else { break };
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
     let next = |what: &str| {
         rx.recv_timeout(Duration::from_secs(60))
             .unwrap_or_else(|_| panic!("no output while waiting for {what}"))
@@ -133,19 +119,13 @@ fn ctrl_c_stops_a_long_run_and_the_session_continues() {
 
 #[test]
 fn a_log_of_non_finite_values_warns_and_plays_back() {
-    let dir = common::workdir("nonfinite-log");
-    std::fs::write(
-        dir.join("inf.score"),
+    let dir = common::workdir_with(
+        "nonfinite-log",
+        "inf.score",
         "var\ndefexp num 1\ndefexp den 1\ndefexp x num den /\nlog x 10 x.log\nrun 0.2\n\
          set den 0\nrun 0.2\nset num -1\nrun 0.1\nset num 0\nrun 0.1\n",
-    )
-    .unwrap();
-    let out = score()
-        .args(["-q", "--script", "inf.score", "--dir"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(out.status.success());
+    );
+    let out = run_ok(&mut score_in(&dir, &["-q", "--script", "inf.score"]));
     let err = String::from_utf8_lossy(&out.stderr);
     // Said once, where it first happened.
     assert_eq!(err.matches("warning: log:").count(), 1, "{err}");
@@ -176,18 +156,8 @@ fn a_log_of_non_finite_values_warns_and_plays_back() {
 
 #[test]
 fn a_script_with_a_byte_order_mark_runs_and_loads() {
-    let dir = common::workdir("bom");
-    std::fs::write(dir.join("bom.score"), "\u{feff}var\ndefexp k 2\n").unwrap();
-    let out = score()
-        .args(["-q", "--script", "bom.score", "--dir"])
-        .arg(&dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let dir = common::workdir_with("bom", "bom.score", "\u{feff}var\ndefexp k 2\n");
+    run_ok(&mut score_in(&dir, &["-q", "--script", "bom.score"]));
     let mut s = Session::new(TimeMode::Simulated, &dir);
     s.line("load bom.score", &mut String::new()).unwrap();
     assert_eq!(s.engine().value_of("k"), Some(2.0));
@@ -202,11 +172,8 @@ fn a_script_with_a_byte_order_mark_runs_and_loads() {
 
 #[test]
 fn errors_of_scripts_and_piped_lines_show_the_column() {
-    let dir = common::workdir("column");
-    std::fs::write(dir.join("c.score"), "var\ndefexp k 2\ndefexp x k 2 $ +\n").unwrap();
-    let out = score()
-        .args(["-q", "--script", "c.score", "--dir"])
-        .arg(&dir)
+    let dir = common::workdir_with("column", "c.score", "var\ndefexp k 2\ndefexp x k 2 $ +\n");
+    let out = score_in(&dir, &["-q", "--script", "c.score"])
         .output()
         .unwrap();
     assert_eq!(

@@ -13,9 +13,13 @@
 //! * [`fuzz`] — the fuzz targets' seed and regression corpora replayed as an ordinary test.
 //! * [`eventually`] — polling for what another process or thread will make true.
 //! * [`run_ok`] — running a program that must succeed, with its output in the failure message.
+//! * [`spawn_with_lines`], [`lines_of`] — a child's output lines on a channel, to wait for with
+//!   a timeout.
 
+use std::io::{BufRead, BufReader, Read};
 use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 pub mod alloc;
@@ -71,4 +75,28 @@ pub fn run_ok(cmd: &mut Command) -> Output {
         String::from_utf8_lossy(&out.stderr)
     );
     out
+}
+
+/// The lines `out` (a child's stdout, say) writes, read by a thread and sent to the returned
+/// receiver, so that a test can wait for each with a timeout. The thread reads to the end of
+/// `out` even when nobody receives any more, so the child never blocks on a full pipe.
+pub fn lines_of(out: impl Read + Send + 'static) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    rx
+}
+
+/// Starts `cmd` with its stdout piped to [`lines_of`] (stdin and stderr as `cmd` sets them);
+/// panics with the command when it cannot start.
+pub fn spawn_with_lines(cmd: &mut Command) -> (Child, mpsc::Receiver<String>) {
+    let mut child = cmd
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{cmd:?} did not start: {e}"));
+    let lines = lines_of(child.stdout.take().expect("stdout is piped"));
+    (child, lines)
 }

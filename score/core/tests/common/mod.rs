@@ -97,6 +97,14 @@ pub fn run(e: &mut Engine<Num>, hal: &mut MemBoard, lines: &str) -> String {
     out
 }
 
+/// Runs a line that must be refused; returns the refusal's message.
+pub fn refused(e: &mut Engine<Num>, hal: &mut MemBoard, line: &str) -> String {
+    match e.execute(line, hal, &mut String::new()) {
+        Ok(o) => panic!("{line}: not refused ({o:?})"),
+        Err(err) => err.to_string(),
+    }
+}
+
 /// Simulated time: runs every due update with deadline < `until_us`.
 pub fn run_until(e: &mut Engine<Num>, hal: &mut MemBoard, until_us: u64) {
     while let Some(t) = e.next_deadline() {

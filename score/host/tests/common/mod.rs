@@ -13,6 +13,14 @@ pub fn score() -> Command {
     Command::new(env!("CARGO_BIN_EXE_score"))
 }
 
+/// `score args… --dir dir`: scripts named in `args` are found in `dir` and write their logs there.
+/// Run it with `.output()`, or with `conductor_testkit::run_ok` where it must succeed.
+pub fn score_in(dir: &Path, args: &[&str]) -> Command {
+    let mut cmd = score();
+    cmd.args(args).arg("--dir").arg(dir);
+    cmd
+}
+
 /// `score args…` with `input` piped to it as a session; its stdout captured (stderr inherited).
 pub fn piped_session(args: &[&str], input: &[u8]) -> Output {
     let mut child = score()
@@ -44,6 +52,13 @@ pub fn workdir(tag: &str) -> PathBuf {
         let e = e.unwrap();
         std::fs::copy(e.path(), dir.join(e.file_name())).unwrap();
     }
+    dir
+}
+
+/// [`workdir`] with one more file, `name`, holding `text` (a script of the test's own).
+pub fn workdir_with(tag: &str, name: &str, text: &str) -> PathBuf {
+    let dir = workdir(tag);
+    std::fs::write(dir.join(name), text).unwrap();
     dir
 }
 

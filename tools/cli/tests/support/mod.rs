@@ -2,7 +2,6 @@
 //! `conductor-examples`), background children killed on drop, and the test venv's Python.
 #![allow(dead_code)]
 
-use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::path::PathBuf;
 use std::process::{Child, Command, Output, Stdio};
@@ -87,19 +86,8 @@ pub struct Bg {
 
 impl Bg {
     pub fn spawn(cmd: &mut Command) -> Self {
-        let mut child = cmd
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawn");
-        let (tx, rx) = mpsc::channel();
-        let out = child.stdout.take().unwrap();
-        std::thread::spawn(move || {
-            for l in BufReader::new(out).lines().map_while(Result::ok) {
-                let _ = tx.send(l);
-            }
-        });
-        Self { child, lines: rx }
+        let (child, lines) = conductor_testkit::spawn_with_lines(cmd.stderr(Stdio::piped()));
+        Self { child, lines }
     }
 
     /// Stdout lines up to and including the first that satisfies `pred`.
