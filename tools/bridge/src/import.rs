@@ -423,9 +423,12 @@ impl Importer {
             r.has_catalog = true;
             r.heartbeat = Duration::from_millis(c.heartbeat_ms.max(1));
             // Keep mirrors whose states did not change; take out the others.
-            let (keep, dropped): (Vec<Mirror>, Vec<Mirror>) = std::mem::take(&mut r.mirrors)
-                .into_iter()
-                .partition(|m| by_sub.iter().any(|(s, e)| *s == m.owner_sub && *e == m.entries));
+            let (keep, dropped): (Vec<Mirror>, Vec<Mirror>) =
+                std::mem::take(&mut r.mirrors).into_iter().partition(|m| {
+                    by_sub
+                        .iter()
+                        .any(|(s, e)| *s == m.owner_sub && *e == m.entries)
+                });
             r.mirrors = keep;
             let build: Vec<(String, Vec<CatalogEntry>)> = by_sub
                 .into_iter()
@@ -648,7 +651,14 @@ impl State {
         }
     }
 
-    fn forward(&mut self, rules: &[Rule], counters: &Counters, ri: usize, mi: usize, f: &CommandFrame) {
+    fn forward(
+        &mut self,
+        rules: &[Rule],
+        counters: &Counters,
+        ri: usize,
+        mi: usize,
+        f: &CommandFrame,
+    ) {
         let r = &self.remotes[ri];
         let m = &r.mirrors[mi];
         if r.stale {
