@@ -454,7 +454,7 @@ impl Importer {
             let name = format!("{}{sub}", rule.prefix);
             if local
                 .iter()
-                .any(|(s, writers)| *s == name && !writers.iter().any(|w| *w == me))
+                .any(|(s, writers)| *s == name && !writers.contains(&me))
             {
                 warn!(
                     "not importing {sub} from {}: subsystem {name:?} already exists in domain {:?} \
