@@ -59,6 +59,79 @@ struct Group {
     /// Woken by the owner's tick; `None` if the subsystem has no tick event (then the
     /// thread's timeout bounds the delay).
     waiter: Option<TickWaiter>,
+    /// When its tick event last woke the thread, and the tick period seen (for the spin).
+    cadence: Cadence,
+}
+
+/// What one `poll(2)` of the export thread saw.
+#[derive(Debug, Clone, Copy, Default)]
+struct Fired {
+    /// Anything (a tick or a remote command frame).
+    any: bool,
+    /// A tick event.
+    tick: bool,
+}
+
+/// When a subsystem's next tick is due, learnt from the ticks seen (for the spin).
+#[derive(Debug, Clone, Copy, Default)]
+struct Cadence {
+    last: Option<Instant>,
+    /// Mean tick interval (moving average), ns; 0 until two ticks were seen.
+    period_ns: f64,
+    /// Whether the last interval was within a quarter of the mean: the owner ticks steadily.
+    steady: bool,
+}
+
+impl Cadence {
+    fn ticked(&mut self, at: Instant) {
+        if let Some(last) = self.last {
+            let d = at.duration_since(last).as_nanos() as f64;
+            if self.period_ns == 0.0 {
+                self.period_ns = d;
+            }
+            self.steady = (d - self.period_ns).abs() < self.period_ns / 4.0;
+            // A long pause (an owner restarting) does not teach the period.
+            if d < 4.0 * self.period_ns {
+                self.period_ns += (d - self.period_ns) / 8.0;
+            }
+        }
+        self.last = Some(at);
+    }
+
+    /// When the next tick is due, if the owner ticks steadily.
+    fn next(&self) -> Option<Instant> {
+        let last = self.last?;
+        (self.steady && self.period_ns > 0.0)
+            .then(|| last + Duration::from_nanos(self.period_ns as u64))
+    }
+}
+
+/// The export thread's busy-wait before an expected tick (`[export] spin_us`), and how it
+/// adapts: the window opens `lead` before the tick is due and lasts at most `max`; `lead` grows
+/// when a tick came before the thread was spinning and shrinks when it spun long for one.
+#[derive(Debug, Clone, Copy)]
+struct Spin {
+    max: Duration,
+    lead: Duration,
+    /// Ticks caught while spinning / arriving before the window / after it.
+    caught: u64,
+    early: u64,
+    late: u64,
+    /// Time spent spinning.
+    spun: Duration,
+}
+
+impl Spin {
+    fn new(max: Duration) -> Self {
+        Self {
+            max,
+            lead: max / 2,
+            caught: 0,
+            early: 0,
+            late: 0,
+            spun: Duration::ZERO,
+        }
+    }
 }
 
 /// A remote command frame as Zenoh delivered it.
@@ -95,6 +168,8 @@ pub(crate) struct Exporter {
     warn_malformed: RateLimit,
     warn_refused: RateLimit,
     catalog_version: u64,
+    /// `None`: the thread sleeps until a tick wakes it (`spin_us = 0`).
+    spin: Option<Spin>,
 }
 
 impl Exporter {
@@ -146,7 +221,14 @@ impl Exporter {
             warn_malformed: RateLimit::new(),
             warn_refused: RateLimit::new(),
             catalog_version: 0,
+            spin: (cfg.spin_us > 0).then(|| Spin::new(Duration::from_micros(cfg.spin_us))),
         };
+        if me.spin.is_some() {
+            // Sleep until the spin window opens to the microsecond, not the default 50 µs
+            // timer slack later.
+            // SAFETY: prctl(PR_SET_TIMERSLACK) takes an integer and affects this thread only.
+            unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, 1 as libc::c_ulong) };
+        }
         me.rebuild_poll_set();
         me.rescan()?;
         Ok(me)
@@ -182,6 +264,15 @@ impl Exporter {
     /// hosts' states are never re-exported).
     pub(crate) fn rescan(&mut self) -> Result<()> {
         let all = self.bus.list_states()?;
+        self.add(all)
+    }
+
+    /// Subscribes to the states of `all` (a listing of the domain) that match and are not yet
+    /// exported. The listing itself is slow (every service's records are read: tens to hundreds
+    /// of ms for 1 000 states on a loaded machine), so after the first one it is made by
+    /// [`scanner`] in a thread of its own: the export thread never stops sending ticks and
+    /// heartbeats for it.
+    pub(crate) fn add(&mut self, all: Vec<conductor_bus::StateInfo>) -> Result<()> {
         let mut added = 0;
         for s in all {
             if !any_matches(&self.states_sel, &s.subsystem, &s.name)
@@ -280,6 +371,7 @@ impl Exporter {
             }
             .encode(),
             waiter,
+            cadence: Cadence::default(),
         })
     }
 
@@ -342,15 +434,95 @@ impl Exporter {
     }
 
     /// Sleeps until an exported subsystem ticks or a remote command frame arrives (at most
-    /// `timeout`): one `poll(2)` over every tick listener, whatever their number. Allocation-free.
+    /// `timeout`): one `poll(2)` over every tick listener, whatever their number. With a spin
+    /// (`[export] spin_us`), the thread wakes shortly before a steady subsystem's next tick is
+    /// due and busy-polls the same descriptors for at most `spin_us`, so that tick finds it
+    /// running instead of waking it. Allocation-free.
     pub(crate) fn wait(&mut self, timeout: Duration) -> Result<()> {
-        let ms = timeout.as_millis().clamp(0, i32::MAX as u128) as i32;
+        let start = Instant::now();
+        let deadline = start + timeout;
+        if let Some(window) = self.spin_window(start) {
+            let (from, until) = (window.0.min(deadline), window.1.min(deadline));
+            if from > start {
+                let fired = self.poll_fds(Some(from - start))?;
+                if fired.tick {
+                    // The tick came before the window opened: open it earlier.
+                    if let Some(sp) = &mut self.spin {
+                        sp.early += 1;
+                        sp.lead = (sp.lead + sp.max / 8).min(sp.max);
+                    }
+                }
+                if fired.any {
+                    return Ok(());
+                }
+            }
+            let spin_start = Instant::now();
+            while Instant::now() < until {
+                if self.poll_fds(Some(Duration::ZERO))?.any {
+                    let now = Instant::now();
+                    if let Some(sp) = &mut self.spin {
+                        sp.caught += 1;
+                        let spun = now - spin_start;
+                        sp.spun += spun;
+                        // Aim at spinning a quarter of the window before the tick.
+                        if spun > sp.max / 4 {
+                            sp.lead = sp.lead.saturating_sub(sp.max / 32);
+                        }
+                    }
+                    return Ok(());
+                }
+                std::hint::spin_loop();
+            }
+            if let Some(sp) = &mut self.spin {
+                sp.late += 1;
+                sp.spun += Instant::now() - spin_start;
+            }
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        self.poll_fds(Some(left))?;
+        Ok(())
+    }
+
+    /// The next spin window `(open, close)`: before the earliest tick due of a steady subsystem
+    /// whose window has not closed yet.
+    fn spin_window(&self, now: Instant) -> Option<(Instant, Instant)> {
+        let sp = self.spin?;
+        self.groups
+            .iter()
+            .filter(|g| g.waiter.is_some())
+            .filter_map(|g| g.cadence.next())
+            .map(|due| {
+                let from = due.checked_sub(sp.lead).unwrap_or(due);
+                (from, from + sp.max)
+            })
+            .filter(|w| w.1 > now)
+            .min()
+    }
+
+    /// One `poll(2)` over the wake-up and the tick listeners (µs resolution); consumes what
+    /// fired and notes the ticks' times.
+    fn poll_fds(&mut self, timeout: Option<Duration>) -> Result<Fired> {
         for p in &mut self.fds {
             p.revents = 0;
         }
+        let ts = timeout.map(|t| libc::timespec {
+            tv_sec: t.as_secs().min(i32::MAX as u64) as libc::time_t,
+            tv_nsec: t.subsec_nanos() as libc::c_long,
+        });
+        let tsp = ts
+            .as_ref()
+            .map_or(std::ptr::null(), |t| t as *const libc::timespec);
         // SAFETY: `fds` is a valid, initialised array of `fds.len()` entries; its descriptors
-        // belong to the wake-up and to listeners owned by `self`, alive during the call.
-        let r = unsafe { libc::poll(self.fds.as_mut_ptr(), self.fds.len() as libc::nfds_t, ms) };
+        // belong to the wake-up and to listeners owned by `self`, alive during the call; `tsp` is
+        // null or points to a live timespec; a null signal mask leaves the mask unchanged.
+        let r = unsafe {
+            libc::ppoll(
+                self.fds.as_mut_ptr(),
+                self.fds.len() as libc::nfds_t,
+                tsp,
+                std::ptr::null(),
+            )
+        };
         if r < 0 {
             let e = std::io::Error::last_os_error();
             if e.kind() != std::io::ErrorKind::Interrupted {
@@ -358,19 +530,45 @@ impl Exporter {
                     "waiting for ticks: {e}"
                 )));
             }
-            return Ok(());
+            return Ok(Fired::default());
         }
+        let mut fired = Fired {
+            any: r > 0,
+            tick: false,
+        };
+        if r == 0 {
+            return Ok(fired);
+        }
+        let now = Instant::now();
         if self.fds[0].revents != 0 {
             self.wake.drain();
         }
         for (p, &gi) in self.fds[1..].iter().zip(&self.fd_group) {
             if p.revents != 0 {
-                if let Some(w) = &mut self.groups[gi].waiter {
+                fired.tick = true;
+                let g = &mut self.groups[gi];
+                g.cadence.ticked(now);
+                if let Some(w) = &mut g.waiter {
                     w.try_consume()?;
                 }
             }
         }
-        Ok(())
+        Ok(fired)
+    }
+
+    /// What the spin did: ticks caught while spinning, ticks before / after the window, time
+    /// spent spinning (`None` without a spin).
+    pub(crate) fn spin_summary(&self) -> Option<String> {
+        let sp = self.spin?;
+        Some(format!(
+            "spin {} µs: {} tick(s) caught spinning, {} before the window, {} after it; {:.3} s \
+             spent spinning",
+            sp.max.as_micros(),
+            sp.caught,
+            sp.early,
+            sp.late,
+            sp.spun.as_secs_f64()
+        ))
     }
 
     /// Sends what the local states published since the last call: one message per subsystem
@@ -532,6 +730,33 @@ impl Exporter {
     }
 }
 
+/// Lists the domain's states every [`RESCAN`] for the export thread, on a bus node of its own,
+/// until `stop()` or the export thread is gone. A listing the export thread has not taken yet
+/// is not queued behind another.
+pub(crate) fn scanner(
+    bus: Bus,
+    tx: SyncSender<Vec<conductor_bus::StateInfo>>,
+    stop: impl Fn() -> bool,
+) {
+    let mut warn_failed = RateLimit::new();
+    while !stop() {
+        std::thread::sleep(RESCAN);
+        let t = Instant::now();
+        match bus.list_states() {
+            Ok(all) => match tx.try_send(all) {
+                Ok(()) | Err(TrySendError::Full(_)) => {}
+                Err(TrySendError::Disconnected(_)) => return,
+            },
+            Err(e) => {
+                if warn_failed.allow().is_some() {
+                    warn!("cannot list the domain's states: {e}");
+                }
+            }
+        }
+        tracing::debug!("listed the domain's states in {:?}", t.elapsed());
+    }
+}
+
 /// Frames older than this (one-way, measured against the smallest delay seen from their host)
 /// are dropped: a link that comes back must not replay stale setpoints.
 pub const COMMAND_MAX_AGE: Duration = Duration::from_millis(250);
@@ -625,5 +850,35 @@ fn queue_frame(
             Counters::bump(&counters.commands_dropped);
         }
         Err(TrySendError::Disconnected(_)) => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_next_tick_is_expected_only_from_a_steady_owner() {
+        let t0 = Instant::now();
+        let ms = Duration::from_millis(1);
+        let mut c = Cadence::default();
+        assert_eq!(c.next(), None, "nothing seen yet");
+        c.ticked(t0);
+        assert_eq!(c.next(), None, "one tick says no period");
+        for i in 1..=20 {
+            c.ticked(t0 + i * ms);
+        }
+        let due = c.next().expect("steady ticks give a due time");
+        assert_eq!(due.duration_since(t0), 21 * ms);
+        // A tick far off the period: no spin until the owner is steady again.
+        c.ticked(t0 + 30 * ms);
+        assert_eq!(c.next(), None);
+        c.ticked(t0 + 31 * ms);
+        assert!(c.next().is_some());
+        // A long pause does not teach the period.
+        c.ticked(t0 + 1031 * ms);
+        c.ticked(t0 + 1032 * ms);
+        let due = c.next().expect("steady again");
+        assert!(due.duration_since(t0 + 1032 * ms) < 2 * ms);
     }
 }

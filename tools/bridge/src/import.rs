@@ -1,13 +1,20 @@
 //! The import side: remote states in from Zenoh as local mirror states, local command frames for
 //! those mirrors out to the owning host.
 //!
-//! One thread. Zenoh's callbacks only move a message into a bounded queue (waking this thread);
-//! this thread checks it (envelope, tick message size and every sample's ABI fields, a catalog
-//! that declares the subsystem, a sequence newer than the last) and publishes its samples on the
-//! mirror through an ordinary [`StatePublisher`], then notifies the mirror's tick event once, so
+//! No thread wake-up between the link and the local bus: Zenoh's subscriber callback checks a
+//! tick message (envelope, size and every sample's ABI fields, a catalog that declares the
+//! subsystem, a sequence newer than the last) and publishes its samples on the mirror right
+//! there, through an ordinary [`StatePublisher`], then notifies the mirror's tick event once, so
 //! every local tool reads them as states and a controller can wait on a mirror's tick as on a
-//! local one. Mirrors of one remote host live on a bus node called
-//! `bridge@<host>`, which is how `conductor list` tells whose a state is.
+//! local one. Heartbeats are handled in their callback too. Mirrors of one remote host live on a
+//! bus node called `bridge@<host>`, which is how `conductor list` tells whose a state is.
+//!
+//! The import thread does the rest: it builds mirrors from catalogs (service creation is slow and
+//! rare), forwards local command frames, and marks quiet hosts STALE. What the callbacks and the
+//! thread share (the mirrors, each host's liveness) sits behind one mutex, so a STALE mark and a
+//! sample are never interleaved: the mark re-publishes the newest sample, and a sample that
+//! arrives after it clears it. The lock is uncontended in practice (the thread takes it once per
+//! [`POLL`](crate::POLL) for microseconds), and none of this is an executor's real-time path.
 //!
 //! A host whose heartbeats and samples stop for two heartbeat periods has every mirror
 //! re-published once with `STALE` set (same value, tick and sample time); the next valid sample
@@ -16,7 +23,7 @@
 
 use std::collections::HashMap;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError};
 use std::time::{Duration, Instant};
 
 use conductor_bus::{
@@ -30,45 +37,19 @@ use crate::config::{any_matches, ImportConfig, Selector};
 use crate::counters::{Counters, RateLimit};
 use crate::error::{zenoh, Result};
 use crate::profile::{self, Stage};
-use crate::wire::{self, Catalog, CatalogEntry, Envelope, Heartbeat, Malformed};
+use crate::wire::{self, Catalog, CatalogEntry, Envelope, Heartbeat, Malformed, TickEntries};
 use crate::MIRROR_NODE_PREFIX;
 
-/// Inbound queue between Zenoh's threads and this one: at 1000 states × 1 kHz that is 16 ms of
-/// samples; beyond it the newest are dropped and counted (latest-value: an older sample of the
-/// same state is already queued).
-const INBOUND_QUEUE: usize = 16_384;
+/// Catalogs waiting for the import thread (they arrive once per second per host at most; beyond
+/// this they are dropped and counted, and the next one is used).
+const CATALOG_QUEUE: usize = 64;
 /// Frames queued for the link (commands are reliable on the link, bounded here).
 pub(crate) const OUTBOUND_COMMANDS: usize = 32;
 
-/// A message from Zenoh, tagged with the import rule whose subscriber got it. The sample itself
-/// is moved through the queue (its key and buffers are reference-counted): no copy and no
-/// allocation per message between Zenoh's thread and this one.
-pub(crate) struct Inbound {
+/// A catalog from Zenoh (published or a query's reply), tagged with its import rule.
+struct CatalogMessage {
     rule: usize,
-    what: What,
     sample: zenoh::sample::Sample,
-}
-
-impl Inbound {
-    fn key(&self) -> &str {
-        self.sample.key_expr().as_str()
-    }
-
-    /// The payload; borrowed when it arrived in one piece (a 48-byte sample always does).
-    fn payload(&self) -> std::borrow::Cow<'_, [u8]> {
-        self.sample.payload().to_bytes()
-    }
-
-    fn attachment(&self) -> Option<std::borrow::Cow<'_, [u8]>> {
-        self.sample.attachment().map(|a| a.to_bytes())
-    }
-}
-
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum What {
-    Sample,
-    Heartbeat,
-    Catalog,
 }
 
 /// A frame for the link: key, payload, attachment.
@@ -101,7 +82,6 @@ struct Mirror {
 struct Remote {
     rule: usize,
     host: String,
-    bus: Bus,
     session: u64,
     catalog_version: u64,
     has_catalog: bool,
@@ -114,39 +94,123 @@ struct Remote {
     index: HashMap<String, usize>,
 }
 
-/// Everything the import thread owns.
-pub(crate) struct Importer {
-    domain: Domain,
-    zs: zenoh::Session,
+/// What Zenoh's callbacks and the import thread share, behind [`Shared::state`].
+struct State {
+    remotes: Vec<Remote>,
+    /// Catalog queries the callbacks want made (made by the import thread, outside the lock).
+    queries: Vec<(usize, String)>,
     host: String,
     session: u64,
-    rules: Vec<Rule>,
-    remotes: Vec<Remote>,
-    rx: Receiver<Inbound>,
-    _subs: Vec<zenoh::pubsub::Subscriber<()>>,
-    tx: SyncSender<Inbound>,
     out: SyncSender<Outbound>,
     cmd_seq: u64,
-    counters: Arc<Counters>,
     warn_malformed: RateLimit,
     warn_unknown: RateLimit,
     warn_commands: RateLimit,
 }
 
-fn enqueue(
-    tx: &SyncSender<Inbound>,
-    counters: &Counters,
-    rule: usize,
-    what: What,
-    sample: zenoh::sample::Sample,
-) {
-    if what == What::Sample && profile::enabled() {
-        if let Some(t) = wire::tick_first_t_sample(&sample.payload().to_bytes()) {
+/// [`State`], movable to Zenoh's threads.
+struct Guarded(State);
+
+// SAFETY: `State` is `!Send` only because of the iceoryx2 ports in its mirrors (`StatePublisher`,
+// `CommandReceiver`): their process-local bookkeeping is reference-counted without atomics
+// (`conductor_bus::PooledRc`, iceoryx2's `SingleThreaded` policy in its `ipc` variant); iceoryx2's
+// `ipc_threadsafe` variant, identical but for a mutex around that bookkeeping, is `Send + Sync`.
+// Here every access goes through the one `Mutex` in `Shared`, which orders them as that variant's
+// mutex would. `PooledRc` also takes per-sample slots from the calling thread's pool and gives
+// them back to the pool of the thread that drops them: a sample is loaned and sent within one
+// `publish` call, on one thread, and the ports themselves are created and dropped only by the
+// import thread (in `Importer::on_catalog` and `Importer::drop`), never by a callback. `Bus`
+// handles (an `Rc`) are not in `State`: the import thread keeps them.
+unsafe impl Send for Guarded {}
+
+/// Shared by the import thread and Zenoh's callbacks.
+struct Shared {
+    rules: Vec<Rule>,
+    counters: Arc<Counters>,
+    /// `None` once the importer is shutting down (late callbacks then do nothing).
+    state: Mutex<Option<Guarded>>,
+}
+
+impl Shared {
+    fn lock(&self) -> MutexGuard<'_, Option<Guarded>> {
+        // A callback that panicked left nothing half-published that matters more than the link.
+        self.state.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Zenoh's callback for tick messages: checks it and publishes its samples on the mirror.
+    fn on_tick(&self, rule: usize, sample: &zenoh::sample::Sample) {
+        let payload = sample.payload().to_bytes();
+        let first_t = profile::enabled()
+            .then(|| wire::tick_first_t_sample(&payload))
+            .flatten();
+        if let Some(t) = first_t {
             profile::record(Stage::ImportArrived, t);
         }
+        let key = sample.key_expr().as_str();
+        // Everything that needs no state is checked before taking the lock.
+        let checked = (|| {
+            let sub = wire::split_tick_key(&self.rules[rule].domain, key)?;
+            let att = sample.attachment().map(|a| a.to_bytes());
+            let env = Envelope::decode(att.as_deref().ok_or(Malformed::Envelope)?)?;
+            let entries = wire::decode_tick(&payload)?;
+            Ok::<_, Malformed>((sub, env, entries))
+        })();
+        let mut g = self.lock();
+        let Some(Guarded(st)) = g.as_mut() else {
+            return;
+        };
+        if let Some(t) = first_t {
+            profile::record(Stage::ImportLocked, t);
+        }
+        match checked {
+            Ok((sub, env, entries)) => st.publish_tick(&self.counters, rule, sub, &env, entries),
+            Err(why) => st.malformed(&self.counters, key, &why),
+        }
     }
-    let m = Inbound { rule, what, sample };
-    if let Err(TrySendError::Full(_)) = tx.try_send(m) {
+
+    /// Zenoh's callback for heartbeats.
+    fn on_heartbeat(&self, rule: usize, sample: &zenoh::sample::Sample) {
+        let key = sample.key_expr().as_str();
+        let checked = (|| {
+            let hb = Heartbeat::decode(&sample.payload().to_bytes())?;
+            // conductor/<domain>/@bridge/<host>/hb
+            let host = key
+                .rsplit('/')
+                .nth(1)
+                .filter(|h| wire::valid_host(h))
+                .ok_or_else(|| Malformed::Key(key.to_string()))?;
+            Ok::<_, Malformed>((hb, host))
+        })();
+        let mut g = self.lock();
+        let Some(Guarded(st)) = g.as_mut() else {
+            return;
+        };
+        match checked {
+            Ok((hb, host)) => st.on_heartbeat(&self.rules, rule, host, &hb),
+            Err(why) => st.malformed(&self.counters, key, &why),
+        }
+    }
+}
+
+/// The import side, owned by the import thread.
+pub(crate) struct Importer {
+    domain: Domain,
+    zs: zenoh::Session,
+    shared: Arc<Shared>,
+    /// One bus node per remote host (`bridge@<host>`), by rule and host; kept on this thread.
+    buses: Vec<(usize, String, Bus)>,
+    catalogs: Receiver<CatalogMessage>,
+    catalog_tx: SyncSender<CatalogMessage>,
+    subs: Vec<zenoh::pubsub::Subscriber<()>>,
+}
+
+fn queue_catalog(
+    tx: &SyncSender<CatalogMessage>,
+    counters: &Counters,
+    rule: usize,
+    sample: zenoh::sample::Sample,
+) {
+    if let Err(TrySendError::Full(_)) = tx.try_send(CatalogMessage { rule, sample }) {
         Counters::bump(&counters.overflow);
     }
 }
@@ -162,63 +226,80 @@ impl Importer {
         out: SyncSender<Outbound>,
         counters: Arc<Counters>,
     ) -> Result<Self> {
-        let (tx, rx) = std::sync::mpsc::sync_channel(INBOUND_QUEUE);
-        let mut subs = Vec::new();
         let mut parsed = Vec::new();
-        for (i, r) in rules.iter().enumerate() {
-            for (what, key) in [
-                (What::Sample, wire::tick_key(&r.domain, "*")),
-                (What::Heartbeat, wire::heartbeat_key(&r.domain, "*")),
-                (What::Catalog, wire::catalog_key(&r.domain, "*")),
-            ] {
-                let (tx, c) = (tx.clone(), counters.clone());
-                subs.push(
-                    zs.declare_subscriber(key)
-                        .callback(move |s| enqueue(&tx, &c, i, what, s))
-                        .wait()
-                        .map_err(zenoh("declaring an import subscriber"))?,
-                );
-            }
+        for r in rules {
             parsed.push(Rule {
                 domain: r.domain.clone(),
                 states: Selector::many(&r.states)?,
                 prefix: r.prefix.clone(),
             });
         }
+        let shared = Arc::new(Shared {
+            rules: parsed,
+            counters: counters.clone(),
+            state: Mutex::new(Some(Guarded(State {
+                remotes: Vec::new(),
+                queries: Vec::new(),
+                host,
+                session,
+                out,
+                cmd_seq: 0,
+                warn_malformed: RateLimit::new(),
+                warn_unknown: RateLimit::new(),
+                warn_commands: RateLimit::new(),
+            }))),
+        });
+        let (catalog_tx, catalogs) = std::sync::mpsc::sync_channel(CATALOG_QUEUE);
+        let mut subs = Vec::new();
+        for (i, r) in rules.iter().enumerate() {
+            let sh = shared.clone();
+            subs.push(
+                zs.declare_subscriber(wire::tick_key(&r.domain, "*"))
+                    .callback(move |s| sh.on_tick(i, &s))
+                    .wait()
+                    .map_err(zenoh("declaring an import subscriber"))?,
+            );
+            let sh = shared.clone();
+            subs.push(
+                zs.declare_subscriber(wire::heartbeat_key(&r.domain, "*"))
+                    .callback(move |s| sh.on_heartbeat(i, &s))
+                    .wait()
+                    .map_err(zenoh("declaring an import subscriber"))?,
+            );
+            let (tx, c) = (catalog_tx.clone(), counters.clone());
+            subs.push(
+                zs.declare_subscriber(wire::catalog_key(&r.domain, "*"))
+                    .callback(move |s| queue_catalog(&tx, &c, i, s))
+                    .wait()
+                    .map_err(zenoh("declaring an import subscriber"))?,
+            );
+        }
         Ok(Self {
             domain,
             zs,
-            host,
-            session,
-            rules: parsed,
-            remotes: Vec::new(),
-            rx,
-            _subs: subs,
-            tx,
-            out,
-            cmd_seq: 0,
-            counters,
-            warn_malformed: RateLimit::new(),
-            warn_unknown: RateLimit::new(),
-            warn_commands: RateLimit::new(),
+            shared,
+            buses: Vec::new(),
+            catalogs,
+            catalog_tx,
+            subs,
         })
     }
 
     /// Asks every exporter of every rule for its catalog now (replies arrive as catalogs).
     pub(crate) fn query_catalogs(&self) {
-        for (i, r) in self.rules.iter().enumerate() {
+        for (i, r) in self.shared.rules.iter().enumerate() {
             self.query(i, &wire::catalog_key(&r.domain, "*"));
         }
     }
 
     fn query(&self, rule: usize, key: &str) {
-        let (tx, c) = (self.tx.clone(), self.counters.clone());
+        let (tx, c) = (self.catalog_tx.clone(), self.shared.counters.clone());
         let res = self
             .zs
             .get(key)
             .callback(move |reply| {
                 if let Ok(s) = reply.result() {
-                    enqueue(&tx, &c, rule, What::Catalog, s.clone());
+                    queue_catalog(&tx, &c, rule, s.clone());
                 }
             })
             .wait();
@@ -227,137 +308,65 @@ impl Importer {
         }
     }
 
-    /// Handles what arrived (waiting up to `timeout` for the first message), forwards local
-    /// command frames, and marks quiet hosts STALE.
+    /// Builds mirrors from the catalogs that arrived (waiting up to `timeout` for one), forwards
+    /// local command frames, marks quiet hosts STALE and asks for the catalogs heartbeats said
+    /// are new. (Tick messages and heartbeats are handled by Zenoh's callbacks.)
     pub(crate) fn step(&mut self, timeout: Duration) -> Result<()> {
-        match self.rx.recv_timeout(timeout) {
+        match self.catalogs.recv_timeout(timeout) {
             Ok(m) => {
-                self.handle(m);
-                // Bounded, so commands and link checks are served even under a flood.
-                for _ in 0..INBOUND_QUEUE {
-                    match self.rx.try_recv() {
-                        Ok(m) => self.handle(m),
-                        Err(_) => break,
-                    }
+                self.catalog(&m);
+                while let Ok(m) = self.catalogs.try_recv() {
+                    self.catalog(&m);
                 }
             }
             Err(RecvTimeoutError::Timeout) | Err(RecvTimeoutError::Disconnected) => {}
         }
-        self.pump_commands();
-        self.check_links();
+        let queries = {
+            let mut g = self.shared.lock();
+            let Some(Guarded(st)) = g.as_mut() else {
+                return Ok(());
+            };
+            st.pump_commands(&self.shared.rules, &self.shared.counters);
+            st.check_links(&self.shared.counters);
+            std::mem::take(&mut st.queries)
+        };
+        // Outside the lock: a reply may be delivered on this very thread.
+        for (rule, key) in queries {
+            self.query(rule, &key);
+        }
         Ok(())
     }
 
-    fn handle(&mut self, m: Inbound) {
-        let res = match m.what {
-            What::Sample => self.on_sample(&m),
-            What::Heartbeat => self.on_heartbeat(&m),
-            What::Catalog => self.on_catalog(&m),
-        };
-        if let Err(why) = res {
-            let n = Counters::bump(&self.counters.malformed);
-            if let Some(held) = self.warn_malformed.allow() {
-                warn!(
-                    "dropped a malformed or foreign message on {}: {why} ({n} malformed so far, \
-                     {held} not logged)",
-                    m.key()
-                );
+    fn catalog(&mut self, m: &CatalogMessage) {
+        if let Err(why) = self.on_catalog(m) {
+            let mut g = self.shared.lock();
+            if let Some(Guarded(st)) = g.as_mut() {
+                st.malformed(&self.shared.counters, m.sample.key_expr().as_str(), &why);
             }
         }
     }
 
-    fn remote(&self, rule: usize, host: &str) -> Option<usize> {
-        self.remotes
+    fn on_catalog(&mut self, m: &CatalogMessage) -> std::result::Result<(), Malformed> {
+        let c = Catalog::decode(&m.sample.payload().to_bytes())?;
+        let rule_i = m.rule;
+        let rule = &self.shared.rules[rule_i];
+        let bus = match self
+            .buses
             .iter()
-            .position(|r| r.rule == rule && r.host == host)
-    }
-
-    fn on_heartbeat(&mut self, m: &Inbound) -> std::result::Result<(), Malformed> {
-        let hb = Heartbeat::decode(&m.payload())?;
-        // conductor/<domain>/@bridge/<host>/hb
-        let host = m
-            .key()
-            .rsplit('/')
-            .nth(1)
-            .filter(|h| wire::valid_host(h))
-            .ok_or_else(|| Malformed::Key(m.key().to_string()))?
-            .to_string();
-        let now = Instant::now();
-        let (rule, domain) = (m.rule, self.rules[m.rule].domain.clone());
-        let want_catalog = match self.remote(rule, &host) {
-            Some(i) => {
-                let r = &mut self.remotes[i];
-                if r.session == hb.session {
-                    self.mark_live(i);
+            .find(|(r, h, _)| *r == rule_i && *h == c.host)
+        {
+            Some((_, _, b)) => b.clone(),
+            None => match Bus::open(&self.domain, &format!("{MIRROR_NODE_PREFIX}{}", c.host)) {
+                Ok(b) => {
+                    self.buses.push((rule_i, c.host.clone(), b.clone()));
+                    b
                 }
-                let r = &self.remotes[i];
-                (r.session != hb.session
-                    || r.catalog_version != hb.catalog_version
-                    || !r.has_catalog)
-                    && r.last_query
-                        .is_none_or(|t| now.duration_since(t) > Duration::from_millis(200))
-            }
-            None => true,
+                Err(e) => {
+                    warn!("cannot join the local domain for host {}: {e}", c.host);
+                    return Ok(());
+                }
+            },
         };
-        if want_catalog {
-            if let Some(i) = self.remote(rule, &host) {
-                self.remotes[i].last_query = Some(now);
-            }
-            self.query(rule, &wire::catalog_key(&domain, &host));
-        }
-        Ok(())
-    }
-
-    fn mark_live(&mut self, i: usize) {
-        let r = &mut self.remotes[i];
-        r.last_seen = Instant::now();
-        if r.stale {
-            r.stale = false;
-            info!("link to {} is back: its states are live again", r.host);
-        }
-    }
-
-    fn on_catalog(&mut self, m: &Inbound) -> std::result::Result<(), Malformed> {
-        let c = Catalog::decode(&m.payload())?;
-        let rule = m.rule;
-        let i = match self.remote(rule, &c.host) {
-            Some(i) => i,
-            None => {
-                let bus = match Bus::open(&self.domain, &format!("{MIRROR_NODE_PREFIX}{}", c.host))
-                {
-                    Ok(b) => b,
-                    Err(e) => {
-                        warn!("cannot join the local domain for host {}: {e}", c.host);
-                        return Ok(());
-                    }
-                };
-                self.remotes.push(Remote {
-                    rule,
-                    host: c.host.clone(),
-                    bus,
-                    session: c.session,
-                    catalog_version: u64::MAX,
-                    has_catalog: false,
-                    heartbeat: Duration::from_millis(c.heartbeat_ms.max(1)),
-                    last_seen: Instant::now(),
-                    last_query: None,
-                    stale: false,
-                    mirrors: Vec::new(),
-                    index: HashMap::new(),
-                });
-                self.remotes.len() - 1
-            }
-        };
-        let r = &mut self.remotes[i];
-        if r.has_catalog && r.session == c.session && r.catalog_version == c.version {
-            return Ok(());
-        }
-        let new_session = r.session != c.session;
-        r.session = c.session;
-        r.catalog_version = c.version;
-        r.has_catalog = true;
-        r.heartbeat = Duration::from_millis(c.heartbeat_ms.max(1));
-        let rule = &self.rules[rule];
         // Group what this rule imports by subsystem, in the owner's index order.
         let mut by_sub: Vec<(String, Vec<CatalogEntry>)> = Vec::new();
         for e in c
@@ -373,109 +382,208 @@ impl Importer {
         for (_, v) in &mut by_sub {
             v.sort_by_key(|e| e.index);
         }
-        let local = self.domain_states();
-        let r = &mut self.remotes[i];
-        if new_session {
-            for m in &mut r.mirrors {
-                m.last_seq = 0;
+
+        // Under the lock: take out the mirrors that change; they are dropped, and new ones
+        // built, here on this thread without it (creating services is slow).
+        let (i, dropped, build) = {
+            let mut g = self.shared.lock();
+            let Some(Guarded(st)) = g.as_mut() else {
+                return Ok(());
+            };
+            let i = match st.remote(rule_i, &c.host) {
+                Some(i) => i,
+                None => {
+                    st.remotes.push(Remote {
+                        rule: rule_i,
+                        host: c.host.clone(),
+                        session: c.session,
+                        catalog_version: u64::MAX,
+                        has_catalog: false,
+                        heartbeat: Duration::from_millis(c.heartbeat_ms.max(1)),
+                        last_seen: Instant::now(),
+                        last_query: None,
+                        stale: false,
+                        mirrors: Vec::new(),
+                        index: HashMap::new(),
+                    });
+                    st.remotes.len() - 1
+                }
+            };
+            let r = &mut st.remotes[i];
+            if r.has_catalog && r.session == c.session && r.catalog_version == c.version {
+                return Ok(());
             }
-        }
-        // Keep mirrors whose states did not change; rebuild the others.
-        let mut kept: Vec<Mirror> = Vec::new();
-        let old = std::mem::take(&mut r.mirrors);
-        let mut old: Vec<Option<Mirror>> = old.into_iter().map(Some).collect();
-        for (sub, entries) in by_sub {
-            let name = format!("{}{sub}", rule.prefix);
-            if let Some(m) = old
-                .iter_mut()
-                .find(|m| {
-                    m.as_ref()
-                        .is_some_and(|m| m.owner_sub == sub && m.entries == entries)
-                })
-                .and_then(Option::take)
-            {
-                kept.push(m);
-                continue;
+            if r.session != c.session {
+                for m in &mut r.mirrors {
+                    m.last_seq = 0;
+                }
             }
-            // Drop our previous mirror of it first, so its services can be re-created.
-            if let Some(slot) = old
-                .iter_mut()
-                .find(|m| m.as_ref().is_some_and(|m| m.owner_sub == sub))
-            {
-                *slot = None;
-            }
-            if local.iter().any(|(s, writers)| {
-                *s == name
-                    && !writers
+            r.session = c.session;
+            r.catalog_version = c.version;
+            r.has_catalog = true;
+            r.heartbeat = Duration::from_millis(c.heartbeat_ms.max(1));
+            // Keep mirrors whose states did not change; take out the others.
+            let (keep, dropped): (Vec<Mirror>, Vec<Mirror>) =
+                std::mem::take(&mut r.mirrors).into_iter().partition(|m| {
+                    by_sub
                         .iter()
-                        .any(|w| w == &format!("{MIRROR_NODE_PREFIX}{}", r.host))
-            }) {
+                        .any(|(s, e)| *s == m.owner_sub && *e == m.entries)
+                });
+            r.mirrors = keep;
+            let build: Vec<(String, Vec<CatalogEntry>)> = by_sub
+                .into_iter()
+                .filter(|(s, _)| !r.mirrors.iter().any(|m| m.owner_sub == *s))
+                .collect();
+            r.index = r
+                .mirrors
+                .iter()
+                .enumerate()
+                .map(|(mi, m)| (m.owner_sub.clone(), mi))
+                .collect();
+            (i, dropped, build)
+        };
+        // Our previous mirror of a subsystem goes first, so its services can be re-created.
+        drop(dropped);
+        let local: Vec<(String, Vec<String>)> = bus
+            .list_states()
+            .map(|v| v.into_iter().map(|s| (s.subsystem, s.nodes)).collect())
+            .unwrap_or_default();
+        let me = format!("{MIRROR_NODE_PREFIX}{}", c.host);
+        let mut built = Vec::new();
+        for (sub, entries) in build {
+            let name = format!("{}{sub}", rule.prefix);
+            if local
+                .iter()
+                .any(|(s, writers)| *s == name && !writers.contains(&me))
+            {
                 warn!(
                     "not importing {sub} from {}: subsystem {name:?} already exists in domain {:?} \
                      (set an import prefix)",
-                    r.host,
+                    c.host,
                     self.domain.name()
                 );
                 continue;
             }
-            match make_mirror(&r.bus, &sub, &name, entries) {
+            match make_mirror(&bus, &sub, &name, entries) {
                 Ok(m) => {
                     info!(
                         "mirroring {} state(s) of {}'s {sub} as {name}/* ({} accept commands)",
                         m.states.len(),
-                        r.host,
+                        c.host,
                         m.states.iter().filter(|s| s.writable).count()
                     );
-                    kept.push(m);
+                    built.push(m);
                 }
-                Err(e) => warn!("cannot mirror {sub} of {}: {e}", r.host),
+                Err(e) => warn!("cannot mirror {sub} of {}: {e}", c.host),
             }
         }
-        drop(old);
-        r.mirrors = kept;
-        r.index.clear();
-        for (mi, m) in r.mirrors.iter().enumerate() {
-            r.index.insert(m.owner_sub.clone(), mi);
+        let mut g = self.shared.lock();
+        let Some(Guarded(st)) = g.as_mut() else {
+            return Ok(());
+        };
+        let r = &mut st.remotes[i];
+        for m in built {
+            r.index.insert(m.owner_sub.clone(), r.mirrors.len());
+            r.mirrors.push(m);
         }
-        self.mark_live(i);
+        st.mark_live(i);
         Ok(())
     }
+}
 
-    /// Local subsystems with their state writers (node names), to avoid claiming a name.
-    fn domain_states(&self) -> Vec<(String, Vec<String>)> {
-        let Some(bus) = self.remotes.first().map(|r| r.bus.clone()) else {
-            return Vec::new();
-        };
-        bus.list_states()
-            .map(|v| v.into_iter().map(|s| (s.subsystem, s.nodes)).collect())
-            .unwrap_or_default()
+impl Drop for Importer {
+    fn drop(&mut self) {
+        // No more callbacks, then the mirrors' ports are dropped here, on the thread that made
+        // them (a callback still running finishes first: it holds the lock).
+        self.subs.clear();
+        let state = self.shared.lock().take();
+        drop(state);
+    }
+}
+
+impl State {
+    fn remote(&self, rule: usize, host: &str) -> Option<usize> {
+        self.remotes
+            .iter()
+            .position(|r| r.rule == rule && r.host == host)
     }
 
-    fn on_sample(&mut self, m: &Inbound) -> std::result::Result<(), Malformed> {
-        let rule = m.rule;
-        let sub = wire::split_tick_key(&self.rules[rule].domain, m.key())?;
-        let env = Envelope::decode(&m.attachment().ok_or(Malformed::Envelope)?)?;
-        let payload = m.payload();
-        if let Some(t) = wire::tick_first_t_sample(&payload).filter(|_| profile::enabled()) {
-            profile::record(Stage::ImportTaken, t);
+    fn malformed(&mut self, counters: &Counters, key: &str, why: &Malformed) {
+        let n = Counters::bump(&counters.malformed);
+        if let Some(held) = self.warn_malformed.allow() {
+            warn!(
+                "dropped a malformed or foreign message on {key}: {why} ({n} malformed so far, \
+                 {held} not logged)"
+            );
         }
-        let entries = wire::decode_tick(&payload)?;
+    }
+
+    fn on_heartbeat(&mut self, rules: &[Rule], rule: usize, host: &str, hb: &Heartbeat) {
+        let now = Instant::now();
+        let want_catalog = match self.remote(rule, host) {
+            Some(i) => {
+                if self.remotes[i].session == hb.session {
+                    self.mark_live(i);
+                }
+                let r = &mut self.remotes[i];
+                let want = (r.session != hb.session
+                    || r.catalog_version != hb.catalog_version
+                    || !r.has_catalog)
+                    && r.last_query
+                        .is_none_or(|t| now.duration_since(t) > Duration::from_millis(200));
+                if want {
+                    r.last_query = Some(now);
+                }
+                want
+            }
+            None => true,
+        };
+        if want_catalog {
+            let key = wire::catalog_key(&rules[rule].domain, host);
+            if !self.queries.iter().any(|(r, k)| *r == rule && *k == key) {
+                self.queries.push((rule, key));
+            }
+        }
+    }
+
+    fn mark_live(&mut self, i: usize) {
+        let r = &mut self.remotes[i];
+        r.last_seen = Instant::now();
+        if r.stale {
+            r.stale = false;
+            info!("link to {} is back: its states are live again", r.host);
+        }
+    }
+
+    fn publish_tick(
+        &mut self,
+        counters: &Counters,
+        rule: usize,
+        sub: &str,
+        env: &Envelope,
+        entries: TickEntries<'_>,
+    ) {
         let Some(i) = self.remote(rule, &env.host) else {
-            return self.unknown(&env.host, sub, "no catalog from that host yet");
+            return self.unknown(counters, &env.host, sub, "no catalog from that host yet");
         };
         let r = &mut self.remotes[i];
         if r.session != env.session {
-            return self.unknown(&env.host, sub, "from another session than its catalog");
+            return self.unknown(
+                counters,
+                &env.host,
+                sub,
+                "from another session than its catalog",
+            );
         }
         let Some(&mi) = r.index.get(sub) else {
             // Exported but not imported by this rule, or not in the host's catalog.
-            Counters::bump(&self.counters.unknown);
-            return Ok(());
+            Counters::bump(&counters.unknown);
+            return;
         };
         let mirror = &mut r.mirrors[mi];
         if env.seq <= mirror.last_seq {
-            Counters::bump(&self.counters.out_of_order);
-            return Ok(());
+            Counters::bump(&counters.out_of_order);
+            return;
         }
         mirror.last_seq = env.seq;
         let mut first_t = None;
@@ -506,7 +614,7 @@ impl Importer {
             if let Err(e) = mirror.publisher.notify_tick() {
                 warn!("cannot notify the tick of mirror {}: {e}", mirror.name);
             }
-            self.counters
+            counters
                 .imported
                 .fetch_add(n, std::sync::atomic::Ordering::Relaxed);
         }
@@ -514,21 +622,19 @@ impl Importer {
             profile::record(Stage::ImportPublished, t);
         }
         self.mark_live(i);
-        Ok(())
     }
 
-    fn unknown(&mut self, host: &str, sub: &str, why: &str) -> std::result::Result<(), Malformed> {
-        let n = Counters::bump(&self.counters.unknown);
+    fn unknown(&mut self, counters: &Counters, host: &str, sub: &str, why: &str) {
+        let n = Counters::bump(&counters.unknown);
         if let Some(held) = self.warn_unknown.allow() {
             info!(
                 "ignored a tick message of {sub} from {host}: {why} ({n} ignored so far, \
                  {held} not logged)"
             );
         }
-        Ok(())
     }
 
-    fn pump_commands(&mut self) {
+    fn pump_commands(&mut self, rules: &[Rule], counters: &Counters) {
         let mut frames: Vec<CommandFrame> = Vec::new();
         for ri in 0..self.remotes.len() {
             for mi in 0..self.remotes[ri].mirrors.len() {
@@ -539,17 +645,24 @@ impl Importer {
                     continue;
                 }
                 for f in &frames {
-                    self.forward(ri, mi, f);
+                    self.forward(rules, counters, ri, mi, f);
                 }
             }
         }
     }
 
-    fn forward(&mut self, ri: usize, mi: usize, f: &CommandFrame) {
+    fn forward(
+        &mut self,
+        rules: &[Rule],
+        counters: &Counters,
+        ri: usize,
+        mi: usize,
+        f: &CommandFrame,
+    ) {
         let r = &self.remotes[ri];
         let m = &r.mirrors[mi];
         if r.stale {
-            let n = Counters::bump(&self.counters.commands_dropped);
+            let n = Counters::bump(&counters.commands_dropped);
             if let Some(held) = self.warn_commands.allow() {
                 warn!(
                     "dropped a command frame for {}: the link to {} is down ({n} dropped so far, \
@@ -568,7 +681,7 @@ impl Importer {
                     out.push(s.owner_index, sp.value);
                 }
                 _ => {
-                    Counters::bump(&self.counters.setpoints_refused);
+                    Counters::bump(&counters.setpoints_refused);
                 }
             }
         }
@@ -583,14 +696,14 @@ impl Importer {
             session: self.session,
             seq: self.cmd_seq,
         };
-        let key = wire::command_key(&self.rules[r.rule].domain, &m.owner_sub);
+        let key = wire::command_key(&rules[r.rule].domain, &m.owner_sub);
         match self
             .out
             .try_send((key, wire::encode_frame(&out), env.encode()))
         {
             Ok(()) => {}
             Err(_) => {
-                let n = Counters::bump(&self.counters.commands_dropped);
+                let n = Counters::bump(&counters.commands_dropped);
                 if let Some(held) = self.warn_commands.allow() {
                     warn!(
                         "dropped a command frame for {}: {OUTBOUND_COMMANDS} frames already wait \
@@ -602,14 +715,16 @@ impl Importer {
         }
     }
 
-    fn check_links(&mut self) {
+    fn check_links(&mut self, counters: &Counters) {
+        // Taken under the lock: a sample handled just before moved `last_seen` past any
+        // earlier reading of the clock.
         let now = Instant::now();
         for r in &mut self.remotes {
             if r.stale || !r.has_catalog || now.duration_since(r.last_seen) <= 2 * r.heartbeat {
                 continue;
             }
             r.stale = true;
-            Counters::bump(&self.counters.stale_events);
+            Counters::bump(&counters.stale_events);
             let mut n = 0;
             for m in &mut r.mirrors {
                 for (si, s) in m.states.iter().enumerate() {

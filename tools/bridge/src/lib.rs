@@ -125,6 +125,14 @@ pub fn run(
             };
             publish_catalog(&ex)?;
             let _ = up.send(Ok((ex.len(), 0)));
+            // Later listings of the domain come from a thread of their own (they are slow).
+            let (scan_tx, scans) = mpsc::sync_channel(1);
+            let (d2, h2, stop2) = (d.clone(), ex.host().to_string(), stop.clone());
+            let _scanner = spawn("bridge-scan", move || {
+                let bus = Bus::open(&d2, &format!("bridge-scan@{h2}"))?;
+                export::scanner(bus, scan_tx, stop2);
+                Ok(())
+            })?;
             let mut next_hb = Instant::now();
             let mut next_scan = Instant::now() + export::RESCAN;
             while !stop() {
@@ -145,11 +153,16 @@ pub fn run(
                     ex.put_heartbeat()?;
                     next_hb = (next_hb + heartbeat).max(now);
                 }
+                if let Ok(all) = scans.try_recv() {
+                    ex.add(all)?;
+                }
                 if now >= next_scan {
-                    ex.rescan()?;
                     publish_catalog(&ex)?;
                     next_scan = now + export::RESCAN;
                 }
+            }
+            if let Some(s) = ex.spin_summary() {
+                info!("{s}");
             }
             Ok(())
         })?);

@@ -17,8 +17,8 @@ pub enum Stage {
     ExportPut = 1,
     /// Importer: Zenoh's callback got the message.
     ImportArrived = 2,
-    /// Importer: the import thread took it from its queue.
-    ImportTaken = 3,
+    /// Importer: the callback checked it and holds the importer's lock.
+    ImportLocked = 3,
     /// Importer: the mirror's samples are on the local bus and its tick notified.
     ImportPublished = 4,
 }
@@ -27,7 +27,7 @@ const STAGES: [&str; 5] = [
     "export received",
     "export put",
     "import arrived",
-    "import taken",
+    "import checked and locked",
     "import published",
 ];
 /// Buckets of 1 µs; the last one holds everything slower.

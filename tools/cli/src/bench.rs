@@ -84,6 +84,7 @@ pub fn run_bridge(a: &BenchArgs) -> Result<()> {
             .unwrap_or(if a.quick { 1000 } else { 5000 }),
         latency_hz: 1000.0,
         loopback: a.bridge_loopback,
+        spin_us: a.bridge_spin_us,
     };
     let r = crate::bench_bridge::run(&o)?;
     let md = r.markdown();

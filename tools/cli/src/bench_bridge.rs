@@ -7,7 +7,12 @@
 //!    mirror in domain B (through both bridges), beside the same subscriber on A's local bus,
 //!    and beside raw Zenoh pub/sub of the same message between the two namespaces (helper
 //!    processes `conductor __bridge-bench zpub|zsub`): a one-entry tick message with its envelope,
-//!    put with the bridge's publisher settings (congestion drop, express), received in a callback;
+//!    put with the bridge's publisher settings (congestion drop, express), received in a callback.
+//!    The bridge is read twice: by one thread busy-polling both subscribers (as in earlier runs;
+//!    that thread holds a CPU the raw Zenoh run does not lose), then by one thread per side woken
+//!    by the subsystem's tick event, as a controller reads, noting also when the mirror's sample
+//!    was on B's bus (its `t_publish_ns`, stamped by the importing bridge as it publishes): the
+//!    span raw Zenoh's callback measures, from the sample's time to the subscriber having it;
 //! 2. load, `--bridge-states` states at `--bridge-rate` Hz for `--seconds`: CPU % of each bridge
 //!    process and the samples that never reached B (drops).
 //!
@@ -22,7 +27,7 @@ use std::time::{Duration, Instant};
 
 use conductor_bridge::zenoh::{self, Wait};
 use conductor_bus::{
-    monotonic_ns, Bus, Domain, StateMeta, StatePublisher, StateSpec, StateSubscriber,
+    monotonic_ns, Bus, Domain, StateMeta, StatePublisher, StateSpec, StateSubscriber, TickWaiter,
 };
 
 use crate::error::{CliError, Result};
@@ -42,6 +47,8 @@ pub struct Options {
     pub latency_hz: f64,
     /// Use loopback even as root.
     pub loopback: bool,
+    /// The exporting bridge's `--spin-us` (`None`: its default).
+    pub spin_us: Option<u64>,
 }
 
 fn err(m: impl Into<String>) -> CliError {
@@ -272,13 +279,23 @@ fn publisher(
     })
 }
 
-fn bridge(sides: &Sides, i: usize, d: &Domain, remote: &Domain, export: &str) -> Result<Helper> {
+fn bridge(
+    sides: &Sides,
+    i: usize,
+    d: &Domain,
+    remote: &Domain,
+    export: &str,
+    spin_us: Option<u64>,
+) -> Result<Helper> {
     let mut c = sides.command(i)?;
     c.arg("--domain").arg(d.name()).arg("bridge");
     c.args(["--host", if i == 0 { "bench-a" } else { "bench-b" }]);
     c.arg("--listen").arg(sides.endpoint(i));
     if i == 0 {
         c.args(["--export", export]);
+        if let Some(us) = spin_us {
+            c.arg("--spin-us").arg(us.to_string());
+        }
     } else {
         c.arg("--connect").arg(sides.endpoint(0));
         c.args(["--import", remote.name()]);
@@ -302,17 +319,59 @@ fn wait_listed(bus: &Bus, name: &str) -> Result<()> {
     Ok(())
 }
 
+/// Reads `n` samples of `lat/s0` in domain `d`, woken by the subsystem's tick event, in its own
+/// thread; returns, per sample, (read time, the sample's `t_publish_ns`) − `t_sample_ns`.
+fn woken_reader(
+    d: &Domain,
+    n: usize,
+    timeout: Duration,
+) -> std::thread::JoinHandle<Result<Vec<(u64, u64)>>> {
+    let d = d.clone();
+    std::thread::spawn(move || {
+        let bus = Bus::open(&d, "bench-woken")?;
+        let mut w = TickWaiter::new(&bus, "lat")?;
+        let mut s = StateSubscriber::with_buffer(&bus, "lat/s0", 16)?;
+        while s.receive()?.is_some() {}
+        let mut v = Vec::with_capacity(n);
+        let end = Instant::now() + timeout;
+        while v.len() < n && Instant::now() < end {
+            w.wait(Duration::from_millis(100))?;
+            while let Some(x) = s.receive()? {
+                let now = monotonic_ns();
+                if x.status & conductor_bus::status::STALE == 0 {
+                    v.push((
+                        now.saturating_sub(x.t_sample_ns),
+                        x.t_publish_ns.saturating_sub(x.t_sample_ns),
+                    ));
+                }
+            }
+        }
+        Ok(v)
+    })
+}
+
 /// The figures of one run.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Report {
     /// How the two sides were joined.
     pub link: String,
-    /// Latency p50/p99 (µs): local bus, raw Zenoh, bridge.
+    /// The exporting bridge's spin (µs; `None`: its default).
+    pub spin_us: Option<u64>,
+    /// Latency p50/p99 (µs), the bench's thread busy-polling: local bus.
     pub local_us: (f64, f64),
     /// Raw Zenoh pub/sub over the link.
     pub zenoh_us: (f64, f64),
-    /// Through both bridges.
+    /// Through both bridges, the bench's thread busy-polling the mirror.
     pub bridge_us: (f64, f64),
+    /// Local bus, read by a thread woken by the tick event.
+    pub local_woken_us: (f64, f64),
+    /// Through both bridges, until the mirror's sample was on B's bus (its `t_publish_ns`).
+    pub bridge_on_bus_us: (f64, f64),
+    /// Through both bridges, read by a thread woken by the mirror's tick event.
+    pub bridge_woken_us: (f64, f64),
+    /// CPU % of the exporting and the importing bridge while one state crossed at 1 kHz (the
+    /// woken-reader part of the latency run).
+    pub latency_cpu_percent: (f64, f64),
     /// States × rate of the load run.
     pub load: (usize, f64, f64),
     /// CPU % of the exporting and the importing bridge during the load run.
@@ -331,26 +390,37 @@ pub struct Report {
 impl Report {
     /// A Markdown section.
     pub fn markdown(&self) -> String {
-        let r = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+        let row = |name: &str, v: (f64, f64)| {
+            let r = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+            format!(
+                "| {name} | {:.1} | {:.1} | {:.2}× | {:.2}× |\n",
+                v.0,
+                v.1,
+                r(v.0, self.zenoh_us.0),
+                r(v.1, self.zenoh_us.1)
+            )
+        };
+        let spin = self
+            .spin_us
+            .map_or("the bridge's default".to_string(), |u| format!("{u} µs"));
         format!(
-            "### Bridge ({link})\n\n\
+            "### Bridge ({link}; export spin {spin})\n\n\
              | path | p50 µs | p99 µs | p50 vs raw Zenoh | p99 vs raw Zenoh |\n|---|---|---|---|---|\n\
-             | local bus (iceoryx2) | {:.1} | {:.1} | {:.2}× | {:.2}× |\n\
-             | raw Zenoh pub/sub | {:.1} | {:.1} | 1.00× | 1.00× |\n\
-             | bridge (export → Zenoh → import) | {:.1} | {:.1} | {:.2}× | {:.2}× |\n\n\
+             {}{}{}{}{}{}\n\
+             The goal (≤ 1.2× at p50) compares \"bridge: on B's bus\" with raw Zenoh: both from the \
+             sample's time to the subscriber having it. While one state crossed (woken readers): \
+             exporting bridge {:.1} % CPU, importing bridge {:.1} % CPU.\n\n\
              Load: {} states at {} Hz for {} s (publisher reached {:.0} ticks/s): exporting bridge \
              {:.1} % CPU, importing bridge {:.1} % CPU; {} of {} samples reached B ({} dropped, \
              {:.3} %); {} samples marked STALE.\n",
-            self.local_us.0,
-            self.local_us.1,
-            r(self.local_us.0, self.zenoh_us.0),
-            r(self.local_us.1, self.zenoh_us.1),
-            self.zenoh_us.0,
-            self.zenoh_us.1,
-            self.bridge_us.0,
-            self.bridge_us.1,
-            r(self.bridge_us.0, self.zenoh_us.0),
-            r(self.bridge_us.1, self.zenoh_us.1),
+            row("raw Zenoh pub/sub (callback)", self.zenoh_us),
+            row("bridge: on B's bus (mirror `t_publish_ns`)", self.bridge_on_bus_us),
+            row("bridge: reader on B woken by the mirror's tick", self.bridge_woken_us),
+            row("bridge: reader on B busy-polling (earlier runs' method)", self.bridge_us),
+            row("local bus: reader woken by the tick", self.local_woken_us),
+            row("local bus: reader busy-polling", self.local_us),
+            self.latency_cpu_percent.0,
+            self.latency_cpu_percent.1,
             self.load.0,
             self.load.1,
             self.load.2,
@@ -429,8 +499,8 @@ pub fn run(o: &Options) -> Result<Report> {
     // 2. Through the bridges, beside the local bus.
     let a = Domain::unique("bbench-a")?;
     let b = Domain::unique("bbench-b")?;
-    let ex = bridge(&sides, 0, &a, &b, "lat/*")?;
-    let im = bridge(&sides, 1, &b, &a, "")?;
+    let ex = bridge(&sides, 0, &a, &b, "lat/*", o.spin_us)?;
+    let im = bridge(&sides, 1, &b, &a, "", None)?;
     let stop = Arc::new(AtomicBool::new(false));
     let p = publisher(&a, "lat", 1, o.latency_hz, stop.clone());
     let bus_a = Bus::open(&a, "bench-a")?;
@@ -459,12 +529,30 @@ pub fn run(o: &Options) -> Result<Report> {
             std::thread::yield_now();
         }
     }
+    drop((sa, sb));
+    // The same, read by threads woken by the tick events (no CPU held by the bench).
+    let timeout = Duration::from_secs_f64(30.0 + 3.0 * n as f64 / o.latency_hz);
+    let (c0, c1) = (cpu_seconds(ex.pid()), cpu_seconds(im.pid()));
+    let t0 = Instant::now();
+    let wa = woken_reader(&a, n, timeout);
+    let wb = woken_reader(&b, n, timeout);
+    let wa = wa.join().map_err(|_| err("a reader panicked"))??;
+    let wb = wb.join().map_err(|_| err("a reader panicked"))??;
+    let wall = t0.elapsed().as_secs_f64();
+    let latency_cpu_percent = (
+        100.0 * (cpu_seconds(ex.pid()) - c0) / wall,
+        100.0 * (cpu_seconds(im.pid()) - c1) / wall,
+    );
     stop.store(true, Ordering::Relaxed);
     p.join().map_err(|_| err("publisher panicked"))??;
     ex.stop();
     im.stop();
     let local_us = (percentile(&mut la, 0.5), percentile(&mut la, 0.99));
     let bridge_us = (percentile(&mut lb, 0.5), percentile(&mut lb, 0.99));
+    let p50_99 = |mut v: Vec<u64>| (percentile(&mut v, 0.5), percentile(&mut v, 0.99));
+    let local_woken_us = p50_99(wa.iter().map(|x| x.0).collect());
+    let bridge_woken_us = p50_99(wb.iter().map(|x| x.0).collect());
+    let bridge_on_bus_us = p50_99(wb.iter().map(|x| x.1).collect());
 
     // 3. Load.
     let a = Domain::unique("bbload-a")?;
@@ -473,8 +561,8 @@ pub fn run(o: &Options) -> Result<Report> {
     let p = publisher(&a, "load", o.states, o.rate_hz, stop.clone());
     let bus_a = Bus::open(&a, "bench-a")?;
     wait_listed(&bus_a, &format!("load/s{}", o.states - 1))?;
-    let ex = bridge(&sides, 0, &a, &b, "load/*")?;
-    let im = bridge(&sides, 1, &b, &a, "")?;
+    let ex = bridge(&sides, 0, &a, &b, "load/*", o.spin_us)?;
+    let im = bridge(&sides, 1, &b, &a, "", None)?;
     let bus_b = Bus::open(&b, "bench-b")?;
     wait_listed(&bus_b, &format!("load/s{}", o.states - 1))?;
     let mut subs = bus_b
@@ -539,9 +627,14 @@ pub fn run(o: &Options) -> Result<Report> {
     im.stop();
     Ok(Report {
         link: sides.describe().into(),
+        spin_us: o.spin_us,
         local_us,
         zenoh_us,
         bridge_us,
+        local_woken_us,
+        bridge_on_bus_us,
+        bridge_woken_us,
+        latency_cpu_percent,
         load: (o.states, o.rate_hz, o.seconds),
         cpu_percent: cpu,
         published,

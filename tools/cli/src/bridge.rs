@@ -42,11 +42,22 @@ pub fn config(args: &BridgeArgs) -> Result<BridgeConfig> {
             rate_hz: None,
             commands: Vec::new(),
             domain: None,
+            spin_us: conductor_bridge::config::DEFAULT_SPIN_US,
         });
         e.states.extend(args.export.iter().cloned());
         e.commands.extend(args.commands.iter().cloned());
         if args.rate_hz.is_some() {
             e.rate_hz = args.rate_hz;
+        }
+    }
+    if let Some(us) = args.spin_us {
+        match c.export.as_mut() {
+            Some(e) => e.spin_us = us,
+            None => {
+                return Err(CliError::Usage(
+                    "--spin-us is the export thread's: give states to --export".into(),
+                ))
+            }
         }
     }
     for d in &args.import {

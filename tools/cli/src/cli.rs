@@ -258,6 +258,10 @@ pub struct BridgeArgs {
     /// Heartbeat period (ms) [default: 50].
     #[arg(long, value_name = "MS")]
     pub heartbeat_ms: Option<u64>,
+    /// Busy-wait of the export thread before each expected tick (µs, 0 = off; at most 1000):
+    /// less latency for up to this × tick rate of a CPU [default: 0].
+    #[arg(long, value_name = "US")]
+    pub spin_us: Option<u64>,
     /// A Zenoh JSON5 configuration applied first (TLS, access control).
     #[arg(long, value_name = "FILE")]
     pub zenoh_config: Option<PathBuf>,
@@ -509,6 +513,9 @@ pub struct BenchArgs {
     /// Run the bridge benchmark over loopback even as root.
     #[arg(long)]
     pub bridge_loopback: bool,
+    /// The exporting bridge's `--spin-us` in the bridge benchmark [default: the bridge's].
+    #[arg(long, value_name = "US")]
+    pub bridge_spin_us: Option<u64>,
 }
 
 /// `conductor launch`.

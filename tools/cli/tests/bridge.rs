@@ -400,7 +400,8 @@ fn counter(summary: &str, name: &str) -> u64 {
 /// The scenarios run one at a time: their timing bounds assume the machine is not running two.
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
-fn scenario(link: Link, tag: &str, inject: bool) {
+/// `spin_us`: the exporting bridge's `--spin-us` (busy-wait before expected ticks), if any.
+fn scenario(link: Link, tag: &str, inject: bool, spin_us: Option<u64>) {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let a = Domain::unique(&format!("{tag}a")).unwrap();
     let b = Domain::unique(&format!("{tag}b")).unwrap();
@@ -418,7 +419,8 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     wait_listed(&bus_a, "leg/knee", Duration::from_secs(30));
 
     let hb = HEARTBEAT_MS.to_string();
-    let exporter = Proc::spawn(link.conductor(0, &a).args([
+    let mut ex = link.conductor(0, &a);
+    ex.args([
         "bridge",
         "--host",
         "hosta",
@@ -430,7 +432,11 @@ fn scenario(link: Link, tag: &str, inject: bool) {
         "leg/knee",
         "--heartbeat-ms",
         &hb,
-    ]));
+    ]);
+    if let Some(us) = spin_us {
+        ex.arg("--spin-us").arg(us.to_string());
+    }
+    let exporter = Proc::spawn(&mut ex);
     exporter.wait_line(
         "ready bridge hosta: exporting 2 state(s)",
         Duration::from_secs(30),
@@ -734,6 +740,10 @@ fn scenario(link: Link, tag: &str, inject: bool) {
     assert!(err_b.contains("is back"), "{err_b}");
     assert!(counter(&err_b, "setpoints_refused") >= 1, "{err_b}");
     assert!(counter(&err_a, "commands_in") >= 10, "{err_a}");
+    if let Some(us) = spin_us {
+        // The spin ran and says what it did (how many ticks it caught depends on the machine).
+        assert!(err_a.contains(&format!("spin {us} µs: ")), "{err_a}");
+    }
     if inject {
         assert!(counter(&err_b, "malformed") >= 6, "{err_b}");
         assert!(counter(&err_b, "unknown") >= 3, "{err_b}");
@@ -749,7 +759,8 @@ fn scenario(link: Link, tag: &str, inject: bool) {
 #[test]
 fn across_loopback_between_two_domains() {
     let port = free_tcp_ports(2);
-    scenario(Link::Loopback { port }, "brlo", true);
+    // With the export spin on, so both ways of waiting for ticks cross a link in the suite.
+    scenario(Link::Loopback { port }, "brlo", true, Some(300));
 }
 
 #[test]
@@ -768,7 +779,7 @@ fn across_two_network_namespaces_joined_by_a_veth_pair() {
         }
     };
     drop(_one);
-    scenario(link, "brns", false);
+    scenario(link, "brns", false, None);
 }
 
 #[test]
