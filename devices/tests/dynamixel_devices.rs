@@ -121,6 +121,48 @@ fn x_series_reads_in_units_rejects_the_impossible_and_holds_the_last_position() 
     assert_eq!((u[0].channel, u[0].value), (x_channel::VELOCITY, None));
 }
 
+/// A position read at `t_ns` (the request's time).
+fn position_at(raw: i64, t_ns: u64) -> Reply {
+    Reply {
+        t_sample_ns: t_ns,
+        ..register(132, 4, raw)
+    }
+}
+
+#[test]
+fn a_position_the_servo_cannot_have_reached_is_held_back_until_the_next_reading_confirms_it() {
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    let ms = 1_000_000;
+    let value = |d: &mut DynamixelX, raw: i64, t: u64| {
+        let u = updates(d, &position_at(raw, t));
+        assert_eq!(u.len(), 1);
+        u[0].value
+    };
+    assert!(value(&mut d, 3072, 0).is_some());
+    // 80 turns in 4 ms: inside the register's ±256-turn range, but a status packet damaged
+    // beyond what its CRC caught, not a servo that turns at 1 200 000 rpm.
+    let damaged = 3072 + 80 * 4096 + 5;
+    assert_eq!(value(&mut d, damaged, 4 * ms), None, "held back: stale");
+    assert_eq!(d.range_rejects(), 1, "counted with the range rejects");
+    // The next reading does not confirm it: it was damaged; the servo moved 8 steps.
+    assert!(value(&mut d, 3080, 8 * ms).is_some());
+    assert_eq!(
+        ops(|o| d.safe(SafeAction::Hold, CTX, o)),
+        [write(116, 4, 3080)],
+        "the hold is where the servo is, never the damaged reading"
+    );
+    // At its top speed (±1023 × 0.229 rpm ≈ 16 000 steps/s) it travels 64 steps in 4 ms.
+    assert!(value(&mut d, 3080 + 60, 12 * ms).is_some());
+    // A real jump (turned by hand while limp and not read, say) is believed at the second
+    // reading that agrees with it: one reading lost, none wrong.
+    assert_eq!(value(&mut d, 9000, 16 * ms), None);
+    assert!(value(&mut d, 9010, 20 * ms).is_some());
+    assert_eq!(d.range_rejects(), 2);
+    // A reading dated earlier than the last one (a late reply) gets the slack, not more.
+    assert!(value(&mut d, 9010 - 300, 19 * ms).is_some());
+    assert_eq!(value(&mut d, 9010 - 300 - 700, 21 * ms), None);
+}
+
 #[test]
 fn protocol_1_servo_speaks_sign_magnitude_and_its_own_addresses() {
     let mut d = Dynamixel1::new(Credential::id(1), Dxl1Model::Ax, 512);

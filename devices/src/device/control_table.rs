@@ -44,6 +44,9 @@ pub struct RegChannel {
     pub read_range: (i64, i64),
     /// Raw values a write may carry (inclusive); setpoints are clamped into it.
     pub write_range: (i64, i64),
+    /// The fastest a healthy device's reading can change (raw steps per second), where
+    /// physics bounds it (a servo's position, by its top speed); `None`: unbounded.
+    pub max_rate: Option<f64>,
 }
 
 impl RegChannel {
@@ -62,6 +65,7 @@ impl RegChannel {
             offset: 0,
             read_range: (0, 0),
             write_range: (0, 0),
+            max_rate: None,
         }
     }
 
@@ -76,6 +80,13 @@ impl RegChannel {
     pub const fn writes(mut self, addr: u16, range: (i64, i64)) -> Self {
         self.write = Some(addr);
         self.write_range = range;
+        self
+    }
+
+    /// Its reading changes by at most `steps_per_s` raw steps a second (see
+    /// [`max_rate`](Self::max_rate)).
+    pub const fn bounded_rate(mut self, steps_per_s: f64) -> Self {
+        self.max_rate = Some(steps_per_s);
         self
     }
 

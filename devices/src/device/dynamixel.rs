@@ -277,7 +277,9 @@ impl ControlTable for XSeries {
             RegChannel::new("position", "rad", 4, Signed)
                 .reads(PRESENT_POSITION, (-pos_max, pos_max))
                 .writes(GOAL_POSITION, goal)
-                .scaled(PULSE_RAD, cfg.zero),
+                .scaled(PULSE_RAD, cfg.zero)
+                // No faster than Present Velocity can report (±1023 units).
+                .bounded_rate(1023.0 * VEL_UNIT / PULSE_RAD),
             RegChannel::new("velocity", "rad/s", 4, Signed)
                 .reads(PRESENT_VELOCITY, (-1023, 1023))
                 .writes(GOAL_VELOCITY, (-1023, 1023))
@@ -410,7 +412,9 @@ impl ControlTable for Dxl1Series {
             RegChannel::new("position", "rad", 2, Unsigned)
                 .reads(36, (0, steps - 1))
                 .writes(30, (0, steps - 1))
-                .scaled(span_rad / steps as f64, self.zero),
+                .scaled(span_rad / steps as f64, self.zero)
+                // No faster than Present Speed can report (1023 units).
+                .bounded_rate(1023.0 * speed / (span_rad / steps as f64)),
             // Moving Speed 0 means "as fast as possible": the smallest magnitude written is 1.
             RegChannel::new("velocity", "rad/s", 2, SignMagnitude10)
                 .reads(38, (-1023, 1023))

@@ -18,7 +18,9 @@
 //!
 //! Range checks matter: a CRC-16 lets about one damaged packet in 65 536 through, a 1.0
 //! checksum one in 256. A value outside its register's physical range is therefore treated as
-//! damaged: the channel goes stale and the rejection is counted, never delivered.
+//! damaged: the channel goes stale and the rejection is counted, never delivered. So is a
+//! position further from the last good one than the servo can travel in between, unless the
+//! next reading confirms it (a damaged packet does not repeat itself).
 
 use super::control_table::{ConfigItem, ControlTable, RegChannel};
 use crate::component::{Channel, Device, SafeAction, TickCtx};
@@ -36,6 +38,9 @@ const BOOT_NS: u64 = 300_000_000;
 /// older reading (the executor did not get the CPU, or its reads were lost) is read again
 /// first: holding where the servo was some time ago would move it back there.
 pub const HOLD_FRESH_NS: u64 = 20_000_000;
+/// Slack on the time between two readings in the rate check (ns): a reading is dated by its
+/// request, and its reply may leave the servo this much later.
+const RATE_SLACK_NS: u64 = 20_000_000;
 
 /// One register a lifecycle step waits for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -174,6 +179,9 @@ pub struct RegDevice<T: ControlTable> {
     last: Vec<Option<i64>>,
     /// When it was read (the request's time, ns).
     last_ns: Vec<u64>,
+    /// A reading of a rate-bounded channel too far from the last good one (raw, time), held
+    /// back until the next reading confirms or refutes it.
+    jump: Vec<Option<(i64, u64)>>,
     /// Tick whose replies carry a device error (alert / failed instruction).
     fault_tick: Option<u64>,
     range_rejects: u64,
@@ -215,6 +223,7 @@ impl<T: ControlTable> RegDevice<T> {
             pending: vec![None; n],
             last: vec![None; n],
             last_ns: vec![0; n],
+            jump: vec![None; n],
             fault_tick: None,
             range_rejects: 0,
             device_errors: 0,
@@ -256,8 +265,8 @@ impl<T: ControlTable> RegDevice<T> {
         *self.read_at.get(i)?
     }
 
-    /// Values rejected by the range check since start (damaged packets that passed the
-    /// CRC/checksum).
+    /// Values rejected by the range check or the rate check since start (damaged packets
+    /// that passed the CRC/checksum).
     pub fn range_rejects(&self) -> u64 {
         self.range_rejects
     }
@@ -747,6 +756,54 @@ impl<T: ControlTable> RegDevice<T> {
         }
     }
 
+    /// A reading of a rate-bounded channel (the position) further from the last good one than
+    /// the servo can travel in between was damaged beyond what the check sum caught: it is
+    /// made a missing read (stale, counted with the range rejects, and no answer to a
+    /// lifecycle step), unless it confirms the reading held back before it, or the next one
+    /// confirms it (a servo turned by hand while nobody read it, a reference that was itself
+    /// damaged): one reading is lost then, never a wrong one taken.
+    fn screen(&mut self, reply: &Reply) -> Reply {
+        let ReplyData::Register { addr, len, value } = reply.data else {
+            return *reply;
+        };
+        let t = reply.t_sample_ns;
+        for i in 0..self.table.len() {
+            let c = self.table[i];
+            let Some(rate) = c.max_rate else { continue };
+            if c.len != len || (self.read_at[i] != Some(addr) && c.read != Some(addr)) {
+                continue;
+            }
+            let raw = c.decode_raw(value);
+            if raw < c.read_range.0 || raw > c.read_range.1 {
+                // The range check rejects it.
+                return *reply;
+            }
+            let within = |from: i64, since: u64| {
+                let span_s = (t.saturating_sub(since) + RATE_SLACK_NS) as f64 * 1e-9;
+                (raw - from).unsigned_abs() as f64 <= rate * span_s + 2.0
+            };
+            let plausible = match (self.last[i], self.jump[i]) {
+                (None, _) => true,
+                (Some(prev), _) if within(prev, self.last_ns[i]) => true,
+                (_, Some((held, at))) => within(held, at),
+                _ => false,
+            };
+            if plausible {
+                self.jump[i] = None;
+                return *reply;
+            }
+            self.jump[i] = Some((raw, t));
+            self.range_rejects += 1;
+            let op = Op::Read { addr, len };
+            return Reply {
+                data: ReplyData::Missing { op },
+                op: Some(op),
+                ..*reply
+            };
+        }
+        *reply
+    }
+
     /// Starts enabling from where it is (the `enable` channel, or a hold-off device's first
     /// setpoint).
     fn start_enable(&mut self) {
@@ -847,6 +904,8 @@ impl<T: ControlTable> Device for RegDevice<T> {
     }
 
     fn reply(&mut self, reply: &Reply, out: &mut Bounded<Update>) {
+        let screened = self.screen(reply);
+        let reply = &screened;
         self.life_reply(reply);
         let fault = self.fault_tick == Some(reply.tick);
         let (addr, len, value) = match reply.data {
