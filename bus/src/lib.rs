@@ -13,6 +13,7 @@ mod history;
 pub mod metadata;
 pub mod naming;
 mod owner;
+pub mod rt;
 pub mod setpoint;
 pub mod shutdown;
 mod spectrum;

@@ -33,7 +33,8 @@ pub mod executor;
 pub mod launcher;
 pub mod process;
 pub mod profile;
-pub mod rt;
+/// Real-time set-up, shared with the gateways and controllers (it lives in the bus crate).
+pub use conductor_bus::rt;
 pub mod schedule;
 pub mod signals;
 pub mod soak;

@@ -36,6 +36,13 @@ pub struct GatewayOptions {
         arg(long = "watchdog-ms", value_name = "MS", value_parser = clap::value_parser!(u64).range(1..=60_000))
     )]
     pub watchdog_ms: Option<u64>,
+    /// SCHED_FIFO priority (1–99) of the gateway's link loop, which carries the command
+    /// watchdog, with its memory locked; normal scheduling unless given.
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, value_name = "PRIO", value_parser = clap::value_parser!(i32).range(1..=99))
+    )]
+    pub priority: Option<i32>,
 }
 
 impl Default for GatewayOptions {
@@ -46,6 +53,7 @@ impl Default for GatewayOptions {
             restore: true,
             retry_ms: None,
             watchdog_ms: None,
+            priority: None,
         }
     }
 }
@@ -68,6 +76,9 @@ impl GatewayOptions {
         }
         if let Some(ms) = self.watchdog_ms {
             a.extend(["--watchdog-ms".into(), ms.to_string().into()]);
+        }
+        if let Some(p) = self.priority {
+            a.extend(["--priority".into(), p.to_string().into()]);
         }
         a
     }

@@ -80,6 +80,7 @@ pub const GATEWAY_KEYS: &[&str] = &[
     "restore",
     "retry_ms",
     "watchdog_ms",
+    "priority",
 ];
 /// Keys of the `[view]` table.
 pub const VIEW_KEYS: &[&str] = &["listen", "clamp"];

@@ -30,7 +30,7 @@ pub struct LaunchOptions {
     pub domain: Option<String>,
     /// Only these subsystems (empty: all).
     pub only: Vec<String>,
-    /// Run the executors without real-time set-up.
+    /// Run the executors (and gateways) without real-time set-up.
     pub no_rt: bool,
     /// No live summary (events — ready, restarts, stops — are always reported on stderr).
     pub quiet: bool,

@@ -82,6 +82,12 @@ pub(super) fn gateway(cx: &mut Ctx, name: &At<String>, t: &mut Table) -> Option<
         (1, 60_000),
         "a command watchdog timeout in ms from 1 to 60000",
     );
+    let priority = t.int(
+        &mut cx.d,
+        "priority",
+        (1, 99),
+        "a SCHED_FIFO priority from 1 to 99",
+    );
     t.finish(&mut cx.d, GATEWAY_KEYS);
     // A wrong optional key has its error recorded, which rejects the whole manifest.
     if !name_ok {
@@ -97,6 +103,7 @@ pub(super) fn gateway(cx: &mut Ctx, name: &At<String>, t: &mut Table) -> Option<
             restore: restore.is_none_or(|r| r.value),
             retry_ms: retry.map(|r| r.value as u64),
             watchdog_ms: watchdog.map(|w| w.value as u64),
+            priority: priority.map(|p| p.value as i32),
         },
     })
 }

@@ -15,6 +15,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use clap::Parser;
+use conductor_bus::rt::{self, RtRequest};
 use conductor_bus::{Bus, Domain};
 use conductor_manifest::{GatewayOptions, ScoreGatewayArgs};
 
@@ -113,6 +114,18 @@ where
         }
     }
     let mut gw = Gateway::new(opts, bus, stop);
+    if let Some(priority) = cli.options.priority {
+        // This thread runs the link loop, and with it the command watchdog.
+        let st = rt::setup(RtRequest {
+            priority: Some(priority),
+            cpu: None,
+            lock_memory: true,
+        });
+        for p in &st.problems {
+            eprintln!("score-gateway: warning: running without full real-time guarantees: {p}");
+        }
+        eprintln!("score-gateway: link loop: {}", st.summary());
+    }
     let ended = gw.run();
     let st = gw.stats;
     eprintln!(
@@ -156,6 +169,7 @@ mod tests {
                 restore: false,
                 retry_ms: Some(50),
                 watchdog_ms: Some(250),
+                priority: Some(70),
             },
         ] {
             def.options = options;

@@ -52,6 +52,29 @@ impl Drop for Gw {
     }
 }
 
+fn is_root() -> bool {
+    std::fs::read_to_string("/proc/self/status").is_ok_and(|s| {
+        s.lines()
+            .find(|l| l.starts_with("Uid:"))
+            .and_then(|l| l.split_whitespace().nth(2))
+            == Some("0")
+    })
+}
+
+/// A process's main thread's scheduling policy and real-time priority, from `/proc/<pid>/stat`
+/// (fields 41 and 40).
+fn scheduling(pid: u32) -> (u32, u32) {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap();
+    // Fields after the command name (which may hold spaces) start at field 3.
+    let rest: Vec<&str> = stat
+        .rsplit_once(')')
+        .unwrap()
+        .1
+        .split_whitespace()
+        .collect();
+    (rest[41 - 3].parse().unwrap(), rest[40 - 3].parse().unwrap())
+}
+
 fn configure(emu: &mut Emulator, lines: &[&str]) {
     let mut t = Port::open(&emu.term, WAIT).unwrap();
     emu.dtr("term", true).unwrap();
@@ -193,8 +216,23 @@ fn the_watchdog_makes_a_duty_safe_when_the_controller_stops() {
     let mut emu = Emulator::start_at(&term, &link).unwrap_or_else(|e| panic!("{e}"));
     configure(&mut emu, &["pwm 4 1000 10"]);
     let domain = Domain::unique("scoregw-wd").unwrap();
-    let gw = Gw::spawn(&link, &domain, &["--watchdog-ms", "1000"]);
+    // The link loop that carries the watchdog runs SCHED_FIFO when asked (as root here; a
+    // user without the right gets a warning and normal scheduling).
+    let gw = Gw::spawn(
+        &link,
+        &domain,
+        &["--watchdog-ms", "1000", "--priority", "10"],
+    );
     gw.ready();
+    if is_root() {
+        assert_eq!(
+            scheduling(gw.child.id()),
+            (1, 10),
+            "the gateway's loop: SCHED_FIFO (policy 1) at priority 10"
+        );
+    } else {
+        eprintln!("not root: the gateway's SCHED_FIFO priority is not checked");
+    }
     let bus = Bus::open(&domain, "score-gateway-test").unwrap();
     let mut pwm4 = StateSubscriber::new(&bus, "score-rp2040/PWM4").unwrap();
     let mut ctl = Controller::new(&bus);

@@ -115,7 +115,14 @@ impl Supervisor {
             Role::Gateway(g) => {
                 let (program, args) = gateway_program(&self.opts, g);
                 let mut cmd = Command::new(program);
-                cmd.args(args).args(gateway_args(g, self.domain.name()));
+                if self.opts.no_rt {
+                    // No real-time set-up for any process of the launch.
+                    let mut g = g.clone();
+                    g.options.priority = None;
+                    cmd.args(args).args(gateway_args(&g, self.domain.name()));
+                } else {
+                    cmd.args(args).args(gateway_args(g, self.domain.name()));
+                }
                 cmd
             }
             Role::View(v) => {
@@ -265,6 +272,7 @@ mod tests {
                 restore: false,
                 retry_ms: Some(50),
                 watchdog_ms: Some(250),
+                priority: Some(70),
             },
             ..def()
         };
@@ -279,7 +287,9 @@ mod tests {
                 "--retry-ms",
                 "50",
                 "--watchdog-ms",
-                "250"
+                "250",
+                "--priority",
+                "70"
             ]
         );
     }

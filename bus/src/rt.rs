@@ -1,6 +1,7 @@
-//! Real-time set-up of the executor thread: CPU affinity, locked memory, pre-faulted stack,
-//! SCHED_FIFO priority. Each step that is not permitted yields a [`RtProblem`] that says how to
-//! grant it; the caller warns and carries on, or refuses to run when real time is required.
+//! Real-time set-up of a thread (an executor's tick loop, a gateway's link loop): CPU
+//! affinity, locked memory, pre-faulted stack, SCHED_FIFO priority. Each step that is not
+//! permitted yields a [`RtProblem`] that says how to grant it; the caller warns and carries on,
+//! or refuses to run when real time is required.
 
 use std::fmt;
 
