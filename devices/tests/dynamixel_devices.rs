@@ -218,3 +218,113 @@ fn hardware_error_read_through_indirect_data_sets_the_fault() {
     );
     assert_eq!(d.status().fault, 0x20);
 }
+
+/// A servo on a perfect line, as the protocol stage hands its answers to the device: every
+/// request answered at once from its registers, writes applied in order. `lose_torque_reads`
+/// makes the line lose every reply that reads Torque Enable.
+struct Servo {
+    regs: std::collections::HashMap<u16, i64>,
+    lose_torque_reads: bool,
+}
+
+impl Servo {
+    fn new() -> Self {
+        Self {
+            // Where it stands, and Goal Position there (its power-on state: torque off).
+            regs: [(132, 2300), (116, 2300)].into(),
+            lose_torque_reads: false,
+        }
+    }
+
+    /// One tick `t` of `d` against the servo; `trip` trips it with a hold first.
+    fn tick(&mut self, d: &mut DynamixelX, t: u64, trip: bool) -> Vec<Op> {
+        let ctx = TickCtx {
+            tick: t,
+            now_ns: t * 4_000_000,
+        };
+        let mut out = Bounded::with_capacity(128);
+        if trip {
+            d.trip(SafeAction::Hold, ctx, &mut out);
+        }
+        d.flush(ctx, &mut out);
+        let requests = out.as_slice().to_vec();
+        let mut updates = Bounded::with_capacity(128);
+        for r in &requests {
+            let data = match r.op {
+                Op::Ping => ReplyData::Ping {
+                    model: Some(1020),
+                    firmware: Some(45),
+                },
+                Op::Write { addr, value, .. } => {
+                    self.regs.insert(addr, value);
+                    continue;
+                }
+                Op::Read { addr: 64, .. } if self.lose_torque_reads => {
+                    ReplyData::Missing { op: r.op }
+                }
+                Op::Read { addr, len } => ReplyData::Register {
+                    addr,
+                    len,
+                    value: self.regs.get(&addr).copied().unwrap_or(0),
+                },
+                _ => continue,
+            };
+            d.reply(
+                &Reply::answer(r.cred, r.op, data, ctx.tick, ctx.now_ns),
+                &mut updates,
+            );
+        }
+        requests.iter().map(|r| r.op).collect()
+    }
+}
+
+/// An enable whose confirmation the line lost may still have switched the servo on: a trip
+/// with a `hold` then holds it where it is (and the read-back says whether it is powered),
+/// never lets go of a joint that may be carrying a load.
+#[test]
+fn a_trip_after_an_unconfirmed_enable_holds_rather_than_letting_go() {
+    use conductor_devices::{Failure, Phase, SafeProgress, Startup};
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    let mut servo = Servo::new();
+    d.bring_up(Startup::Enable, CTX);
+    let mut t = 1;
+    while d.status().phase != Phase::Enabled {
+        servo.tick(&mut d, t, false);
+        t += 1;
+        assert!(t < 100, "brought up and enabled: {:?}", d.status());
+    }
+    assert_eq!(servo.regs[&64], 1, "torque on");
+    // The watchdog trips it (holding), then it is enabled again while the line loses every
+    // read of Torque Enable: the servo switches on, the device cannot tell.
+    servo.tick(&mut d, t, true);
+    t += 1;
+    servo.tick(&mut d, t, false);
+    assert_eq!(d.status().phase, Phase::Holding);
+    servo.lose_torque_reads = true;
+    d.write(d.enable_channel(), 1.0, CTX);
+    while d.status().failure != Some(Failure::EnableRefused) {
+        servo.tick(&mut d, t, false);
+        t += 1;
+        assert!(t < 1_000, "the enable is given up: {:?}", d.status());
+    }
+    assert_eq!(servo.regs[&64], 1, "the servo did switch on");
+    // The controller goes silent: the trip holds it where it stands.
+    servo.regs.insert(132, 2310);
+    servo.lose_torque_reads = false;
+    let first = servo.tick(&mut d, t, true);
+    assert!(
+        !first.contains(&write(64, 1, 0)),
+        "a joint that may carry a load is not let go: {first:?}"
+    );
+    for _ in 0..5 {
+        t += 1;
+        servo.tick(&mut d, t, false);
+    }
+    assert_eq!(servo.regs[&64], 1, "still powered");
+    assert_eq!(servo.regs[&116], 2310, "holding where it stands");
+    let st = d.status();
+    assert_eq!(
+        (st.phase, st.safe),
+        (Phase::Holding, SafeProgress::Confirmed)
+    );
+}

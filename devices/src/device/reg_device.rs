@@ -497,7 +497,13 @@ impl<T: ControlTable> RegDevice<T> {
                 l.base.fail(f);
             }
             // Up, but it did not do what it was asked: limp, and say why.
-            Step::Enable | Step::Align | Step::TorqueOff { .. } => l.base.refuse_enable(),
+            Step::Enable => {
+                // Its Torque Enable write may have taken effect all the same (the read-backs
+                // lost on the line): whether it is powered is not known.
+                l.torque = None;
+                l.base.refuse_enable();
+            }
+            Step::Align | Step::TorqueOff { .. } => l.base.refuse_enable(),
             Step::Reboot => {
                 // No answer to REBOOT (status return level < 2, or it restarted at once):
                 // look for it again.
@@ -756,6 +762,15 @@ impl<T: ControlTable> RegDevice<T> {
         }
     }
 
+    /// Whether it is known to be limp: disabled, and switched off by the user or read with
+    /// its torque off. A device whose enable was given up is disabled but may be powered (its
+    /// confirmation lost on the line): a `hold` holds it rather than letting go of a joint
+    /// that may carry a load, and its read-back of Torque Enable tells which it is.
+    fn known_limp(&self) -> bool {
+        let l = &self.life;
+        l.base.status.phase == Phase::Disabled && (l.base.user_off || l.torque == Some(false))
+    }
+
     /// A reading of a rate-bounded channel (the position) further from the last good one than
     /// the servo can travel in between was damaged beyond what the check sum caught: it is
     /// made a missing read (stale, counted with the range rejects, and no answer to a
@@ -978,9 +993,7 @@ impl<T: ControlTable> Device for RegDevice<T> {
         }
         match action {
             SafeAction::Hold => match self.hold {
-                Some((i, goal))
-                    if self.last[i].is_some() && self.life.base.status.phase != Phase::Disabled =>
-                {
+                Some((i, goal)) if self.last[i].is_some() && !self.known_limp() => {
                     let read = self.table[i].read.map(|a| (a, self.table[i].len));
                     let old = ctx.now_ns.saturating_sub(self.last_ns[i]) > HOLD_FRESH_NS;
                     if let (true, true, Some((addr, len))) = (managed, old, read) {
