@@ -328,3 +328,56 @@ fn a_trip_after_an_unconfirmed_enable_holds_rather_than_letting_go() {
         (Phase::Holding, SafeProgress::Confirmed)
     );
 }
+
+/// A servo still moving when it is brought up again (after its bus came back, it goes on
+/// towards its last goal) is enabled and held where it is when the write lands, not where it
+/// was read rounds earlier: an enable whose confirmation the line lost reads the position again
+/// before it writes it once more, and a hold never takes a reading older than
+/// `HOLD_FRESH_NS` for a fresh one.
+#[test]
+fn a_moving_servo_is_enabled_and_held_where_it_is_after_lost_rounds() {
+    use conductor_devices::{Phase, Startup};
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    let mut servo = Servo::new();
+    d.bring_up(Startup::Enable, CTX);
+    let mut t = 1;
+    while d.status().phase != Phase::Enabled {
+        servo.tick(&mut d, t, false);
+        t += 1;
+        assert!(t < 100, "brought up and enabled: {:?}", d.status());
+    }
+    // The bus goes and comes back; the servo, torque on, moves 3 steps a tick (4 ms)
+    // throughout, and the line loses every read of Torque Enable for 20 ticks of the enable.
+    d.bus_lost();
+    d.bring_up(Startup::Enable, CTX);
+    let mut lost = 0;
+    while d.status().phase != Phase::Enabled {
+        *servo.regs.get_mut(&132).unwrap() += 3;
+        servo.lose_torque_reads = d.status().phase == Phase::Enabling && lost < 20;
+        lost += servo.lose_torque_reads as u32;
+        servo.tick(&mut d, t, false);
+        t += 1;
+        assert!(t < 300, "enabled again: {:?}", d.status());
+    }
+    assert_eq!(lost, 20);
+    let (goal, here) = (servo.regs[&116], servo.regs[&132]);
+    // At most HOLD_FRESH_NS (5 ticks, 15 steps) plus one tick behind; the reading of the
+    // first round was 60 steps behind by then.
+    assert!(
+        (here - goal).abs() <= 18,
+        "enabled at {goal} where the servo stood at {here}"
+    );
+    // The controller goes silent at once: the hold is where the servo is.
+    *servo.regs.get_mut(&132).unwrap() += 3;
+    servo.tick(&mut d, t, true);
+    for _ in 0..3 {
+        t += 1;
+        servo.tick(&mut d, t, false);
+    }
+    let (goal, here) = (servo.regs[&116], servo.regs[&132]);
+    assert!(
+        (here - goal).abs() <= 18,
+        "held at {goal} where the servo stood at {here}"
+    );
+    assert_eq!(d.status().phase, Phase::Holding);
+}

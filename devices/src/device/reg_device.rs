@@ -25,7 +25,8 @@
 use super::control_table::{ConfigItem, ControlTable, RegChannel};
 use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
-    Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, REG_ROUND_TIMEOUT_NS,
+    Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, LOST_ROUNDS,
+    REG_ROUND_TIMEOUT_NS,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
@@ -92,6 +93,11 @@ struct Life {
     torque: Option<bool>,
     /// Raw present position read at Align.
     present: Option<i64>,
+    /// When it was read (the request's time, ns).
+    present_ns: u64,
+    /// Times an enable read the position again because its round was sent again after the
+    /// last reading had aged (bounded: see `drive`).
+    realigns: u8,
     /// Hardware Error Status must be read (an alert was seen).
     fault_check: bool,
     /// Reboot after a fault, automatically (`reboot_on_fault`), at this time.
@@ -118,6 +124,8 @@ impl Life {
             n_expect: 0,
             torque: None,
             present: None,
+            present_ns: 0,
+            realigns: 0,
             fault_check: false,
             reboot_on_fault: false,
             reboot_at: None,
@@ -398,6 +406,18 @@ impl<T: ControlTable> RegDevice<T> {
                 }
             }
             Step::Enable => {
+                let again = self.life.base.tries > 0 || self.life.base.lost > 0;
+                if again && ctx.now_ns.saturating_sub(self.life.present_ns) > HOLD_FRESH_NS {
+                    // Sent again after lost rounds: where it was read is not where it is now
+                    // (a servo still on its way to an old goal). Read it again, then enable
+                    // there, within a bound: a line that keeps losing the round gives up.
+                    if self.life.realigns >= LOST_ROUNDS {
+                        return self.give_up(ctx.now_ns);
+                    }
+                    self.life.realigns += 1;
+                    self.life.go(Step::Align);
+                    return self.drive(ctx, out);
+                }
                 self.life.n_expect = 0;
                 if let (Some((i, goal)), Some(present)) = (self.hold, self.life.present) {
                     let c = self.table[i];
@@ -535,6 +555,7 @@ impl<T: ControlTable> RegDevice<T> {
         l.was_up = true;
         if l.base.goal != Goal::Limp {
             l.base.status.phase = Phase::Enabling;
+            l.realigns = 0;
             l.go(Step::Align);
         } else if l.torque == Some(true) {
             l.go(Step::TorqueOff { then_write: false });
@@ -608,6 +629,7 @@ impl<T: ControlTable> RegDevice<T> {
                     return;
                 }
                 self.life.present = Some(raw);
+                self.life.present_ns = now_ns;
                 self.life.go(Step::Enable);
             }
             Step::Enable => {
@@ -627,8 +649,10 @@ impl<T: ControlTable> RegDevice<T> {
                 l.base.status.failure = None;
                 l.base.switched_on();
                 if let Some((i, _)) = self.hold {
+                    // The reading's own time: a hold right after must not take an old
+                    // reading for a fresh one.
                     self.last[i] = self.life.present;
-                    self.last_ns[i] = now_ns;
+                    self.last_ns[i] = self.life.present_ns;
                 }
             }
             Step::SafeAlign => {
@@ -832,6 +856,7 @@ impl<T: ControlTable> RegDevice<T> {
             l.base.status.phase = Phase::Probing;
         } else {
             l.base.status.phase = Phase::Enabling;
+            l.realigns = 0;
             l.go(Step::Align);
         }
     }
