@@ -210,7 +210,9 @@ impl Bus {
     }
 
     /// Creates `name` with `attrs`, or opens it if a (restarted) owner finds it still held open
-    /// by clients; opening then requires the same attributes.
+    /// by clients; opening then requires the same attributes. The service a killed owner left
+    /// can vanish between the two (the dead node's resources are cleaned up meanwhile, by this
+    /// process or another): then it is created again, a bounded number of times.
     pub(crate) fn create_or_reopen_pubsub<T>(
         &self,
         name: &str,
@@ -224,14 +226,34 @@ impl Bus {
         T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + 'static,
     {
         use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as CE;
+        use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as OE;
+        /// Create-then-open rounds before the race with a cleanup counts as an error.
+        const ROUNDS: u32 = 100;
         let sname = Self::service_name(name)?;
         let builder = || configure(self.node().service_builder(&sname).publish_subscribe::<T>());
-        match builder().create_with_attributes(attrs) {
-            Ok(f) => Ok(f),
-            Err(CE::AlreadyExists) | Err(CE::IsBeingCreatedByAnotherInstance) => builder()
-                .open_with_attributes(&verifier(attrs)?)
-                .map_err(|e| BusError::iceoryx(format!("re-opening {name:?} as its owner"), e)),
-            Err(e) => Err(BusError::iceoryx(format!("creating {name:?}"), e)),
+        let mut round = 0;
+        loop {
+            round += 1;
+            match builder().create_with_attributes(attrs) {
+                Ok(f) => return Ok(f),
+                Err(CE::AlreadyExists) | Err(CE::IsBeingCreatedByAnotherInstance) => {}
+                Err(e) => return Err(BusError::iceoryx(format!("creating {name:?}"), e)),
+            }
+            match builder().open_with_attributes(&verifier(attrs)?) {
+                Ok(f) => return Ok(f),
+                // Gone (or going) since the create found it: create it again.
+                Err(OE::DoesNotExist | OE::IsMarkedForDestruction | OE::HangsInCreation)
+                    if round < ROUNDS =>
+                {
+                    std::thread::sleep(std::time::Duration::from_millis(2));
+                }
+                Err(e) => {
+                    return Err(BusError::iceoryx(
+                        format!("re-opening {name:?} as its owner"),
+                        e,
+                    ))
+                }
+            }
         }
     }
 
