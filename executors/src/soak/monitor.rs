@@ -598,8 +598,11 @@ impl Eye {
         {
             w.wrong_published += 1;
             w.example(format!(
-                "{name}: published {:.5} (tick {}, flags {:#x}) but the device was in [{lo:.5}, {hi:.5}] from its sample time to its publication",
-                s.value, s.tick, s.status
+                "{name}: published {:.5} (tick {}, flags {:#x}, sampled {:.1} ms before its publication) but the device was in [{lo:.5}, {hi:.5}] from its sample time to its publication",
+                s.value,
+                s.tick,
+                s.status,
+                s.t_publish_ns.saturating_sub(s.t_sample_ns) as f64 / 1e6
             ));
         }
     }
