@@ -414,6 +414,22 @@ impl<S: LifeStep> Lifecycle<S> {
         }
     }
 
+    /// An enable asked for while the device cannot take it yet is remembered instead of
+    /// started: offline, it drives again once its bus is back; during its bring-up (probing,
+    /// configuring, a reboot's probe), the bring-up goes on and ends enabled. Starting the
+    /// enable then would send it to a bus that is not there (and give up: "did not switch
+    /// on"), or skip the model check and the configuration's verification. Returns whether it
+    /// was deferred.
+    pub(crate) fn defer_enable(&mut self) -> bool {
+        match self.status.phase {
+            Phase::Offline => self.resume_on = true,
+            Phase::Probing | Phase::Configuring => self.goal = Goal::Drive,
+            _ => return false,
+        }
+        self.user_off = false;
+        true
+    }
+
     /// An accepted setpoint while disabled is a hold-off device's first command: it enables
     /// the device from where it is before it applies.
     pub(crate) fn setpoint_enables(&self) -> bool {

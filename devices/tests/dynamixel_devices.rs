@@ -225,6 +225,8 @@ fn hardware_error_read_through_indirect_data_sets_the_fault() {
 struct Servo {
     regs: std::collections::HashMap<u16, i64>,
     lose_torque_reads: bool,
+    /// Unplugged: every read comes back missing, no write arrives.
+    unplugged: bool,
 }
 
 impl Servo {
@@ -233,6 +235,7 @@ impl Servo {
             // Where it stands, and Goal Position there (its power-on state: torque off).
             regs: [(132, 2300), (116, 2300)].into(),
             lose_torque_reads: false,
+            unplugged: false,
         }
     }
 
@@ -251,6 +254,7 @@ impl Servo {
         let mut updates = Bounded::with_capacity(128);
         for r in &requests {
             let data = match r.op {
+                _ if self.unplugged => ReplyData::Missing { op: r.op },
                 Op::Ping => ReplyData::Ping {
                     model: Some(1020),
                     firmware: Some(45),
@@ -380,4 +384,84 @@ fn a_moving_servo_is_enabled_and_held_where_it_is_after_lost_rounds() {
         "held at {goal} where the servo stood at {here}"
     );
     assert_eq!(d.status().phase, Phase::Holding);
+}
+
+/// Brought up and enabled on a perfect line; returns the next tick.
+fn enabled(d: &mut DynamixelX, servo: &mut Servo) -> u64 {
+    use conductor_devices::{Phase, Startup};
+    d.bring_up(Startup::Enable, CTX);
+    let mut t = 1;
+    while d.status().phase != Phase::Enabled {
+        servo.tick(d, t, false);
+        t += 1;
+        assert!(t < 100, "brought up and enabled: {:?}", d.status());
+    }
+    t
+}
+
+/// An enable asked for while the bus is gone is remembered, not sent to a bus that is not
+/// there (where it would be given up: "did not switch on"); the servo is enabled once the bus
+/// is back and it has been brought up again.
+#[test]
+fn an_enable_while_the_bus_is_gone_waits_for_the_bus() {
+    use conductor_devices::{Phase, Startup};
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    let mut servo = Servo::new();
+    let mut t = enabled(&mut d, &mut servo);
+    // The controller dies: the trip holds it; then the bus goes.
+    servo.tick(&mut d, t, true);
+    t += 1;
+    servo.tick(&mut d, t, false);
+    d.bus_lost();
+    servo.unplugged = true;
+    // A new controller enables it meanwhile.
+    d.write(d.enable_channel(), 1.0, CTX);
+    for _ in 0..200 {
+        t += 1;
+        servo.tick(&mut d, t, false);
+    }
+    assert_eq!(d.status().phase, Phase::Offline);
+    assert_eq!(d.status().failure, None, "nothing was given up");
+    // The bus is back: brought up again, and enabled as asked.
+    servo.unplugged = false;
+    d.bring_up(Startup::Enable, CTX);
+    while d.status().phase != Phase::Enabled {
+        t += 1;
+        servo.tick(&mut d, t, false);
+        assert!(t < 400, "enabled once the bus is back: {:?}", d.status());
+    }
+    assert!(!d.status().tripped);
+}
+
+/// An enable asked for during a bring-up lets the bring-up run its course (model check,
+/// configuration read and verified) and end enabled; it does not jump to enabling a servo
+/// whose configuration has not been read.
+#[test]
+fn an_enable_during_bring_up_does_not_skip_the_configuration() {
+    use conductor_devices::{Phase, Startup};
+    let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
+    let mut servo = Servo::new();
+    let mut t = enabled(&mut d, &mut servo);
+    servo.tick(&mut d, t, true);
+    t += 1;
+    servo.tick(&mut d, t, false);
+    // The bus went and came back: a tripped device is brought up again, to hold.
+    d.bus_lost();
+    d.bring_up(Startup::Enable, CTX);
+    assert_eq!(d.status().phase, Phase::Probing);
+    d.write(d.enable_channel(), 1.0, CTX);
+    let mut ops = Vec::new();
+    while d.status().phase != Phase::Enabled {
+        t += 1;
+        ops.extend(servo.tick(&mut d, t, false));
+        assert!(t < 200, "enabled: {:?}", d.status());
+    }
+    let first = |op: Op| ops.iter().position(|o| *o == op);
+    let torque_on = first(write(64, 1, 1)).expect("torque switched on");
+    let ping = first(Op::Ping).expect("probed");
+    let mode = first(Op::Read { addr: 11, len: 1 }).expect("operating mode read");
+    assert!(
+        ping < mode && mode < torque_on,
+        "probe, configuration, then enable: {ops:?}"
+    );
 }

@@ -763,6 +763,11 @@ impl Stages {
                     continue;
                 };
                 let s = &mut self.states[*si];
+                if s.have_value && u.t_sample_ns < s.t_sample_ns {
+                    // A reading older than the one the state has (a late reply, an earlier
+                    // round's): a state's sample time never goes backwards.
+                    continue;
+                }
                 match u.value {
                     Some(v) => {
                         s.value = s.calib.to_state(v);

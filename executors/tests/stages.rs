@@ -331,17 +331,43 @@ fn replies_reach_devices_by_credential_and_strangers_are_counted() {
             Op::Sample,
             ReplyData::Value(0.25),
             1,
-            123,
+            MS + 123,
         ),
     ]);
     let out = rig.step();
     assert_eq!(rig.stages.counters().unmatched_replies, 1);
-    // Device 2's injected reply arrived after its real one of this tick: it is the newest.
+    // Device 2's injected reply arrived after its real one of this tick, sampled later: it is
+    // the newest.
     let q1 = out.iter().find(|p| p.index == 1).unwrap();
-    assert_eq!((q1.value, q1.t_sample_ns), (0.25, 123));
+    assert_eq!((q1.value, q1.t_sample_ns), (0.25, MS + 123));
     let q0 = out.iter().find(|p| p.index == 0).unwrap();
     assert_eq!(q0.value, 0.0);
     assert_eq!(rig.stages.bus_errors(), 1);
+}
+
+/// A reply that comes after a newer one (an earlier round's, held up on its way) is not
+/// published over it, value or staleness: a state's sample time never goes backwards.
+#[test]
+fn an_older_reading_never_replaces_a_newer_one() {
+    let mut rig = Rig::new(&joints(1, "", "", ""));
+    rig.step();
+    let newer = rig.step();
+    let t_new = newer[0].t_sample_ns;
+    assert!(t_new > 0);
+    rig.inject[0].borrow_mut().extend([
+        Reply::answer(
+            Credential::id(1),
+            Op::Sample,
+            ReplyData::Value(0.75),
+            0,
+            t_new - 1,
+        ),
+        Reply::missing(Credential::id(1), Op::Sample, 0, t_new - 1),
+    ]);
+    let out = rig.step();
+    assert!(out[0].t_sample_ns >= t_new, "{:?}", out[0]);
+    assert_ne!(out[0].value, 0.75, "the older reading is not published");
+    assert_eq!(out[0].status & status::STALE, 0, "nor its missing twin");
 }
 
 #[test]

@@ -848,6 +848,9 @@ impl<T: ControlTable> RegDevice<T> {
     fn start_enable(&mut self) {
         self.pending.iter_mut().for_each(|p| *p = None);
         let l = &mut self.life;
+        if l.base.defer_enable() {
+            return;
+        }
         l.base.goal = Goal::Drive;
         l.base.user_off = false;
         if l.base.status.fault != 0 && T::REBOOT {
