@@ -133,7 +133,7 @@ fn the_score_board_manifest_is_one_gateway_and_no_executor() {
                 restore: true,
                 retry_ms: Some(200),
                 watchdog_ms: Some(200),
-                priority: Some(80),
+                priority: None,
             },
         }]
     );

@@ -508,8 +508,10 @@ impl Eye {
                 let t = e.ms(s.t_publish_ns);
                 let j = &mut e.joints[i];
                 // A trip of before (the controller died while the enable it asked for was
-                // still under way) is not this death's: its watchdog fires a timeout on.
-                let own = t >= self.robot.watchdog_ns as f64 / 2e6;
+                // still under way, or the device is still tripped from an earlier death
+                // until that enable completes) is not this death's: its watchdog fires a
+                // whole timeout after the last command, at the first tick past it.
+                let own = t >= (self.robot.watchdog_ns - self.robot.tick_ns) as f64 / 1e6;
                 if j.flagged_ms.is_none() && own {
                     j.flagged_ms = Some(t);
                 }
