@@ -287,23 +287,13 @@ impl Servo {
 /// never lets go of a joint that may be carrying a load.
 #[test]
 fn a_trip_after_an_unconfirmed_enable_holds_rather_than_letting_go() {
-    use conductor_devices::{Failure, Phase, SafeProgress, Startup};
+    use conductor_devices::{Failure, Phase, SafeProgress};
     let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
     let mut servo = Servo::new();
-    d.bring_up(Startup::Enable, CTX);
-    let mut t = 1;
-    while d.status().phase != Phase::Enabled {
-        servo.tick(&mut d, t, false);
-        t += 1;
-        assert!(t < 100, "brought up and enabled: {:?}", d.status());
-    }
-    assert_eq!(servo.regs[&64], 1, "torque on");
     // The watchdog trips it (holding), then it is enabled again while the line loses every
     // read of Torque Enable: the servo switches on, the device cannot tell.
-    servo.tick(&mut d, t, true);
-    t += 1;
-    servo.tick(&mut d, t, false);
-    assert_eq!(d.status().phase, Phase::Holding);
+    let mut t = tripped(&mut d, &mut servo);
+    assert_eq!(servo.regs[&64], 1, "torque on");
     servo.lose_torque_reads = true;
     d.write(d.enable_channel(), 1.0, CTX);
     while d.status().failure != Some(Failure::EnableRefused) {
@@ -343,13 +333,7 @@ fn a_moving_servo_is_enabled_and_held_where_it_is_after_lost_rounds() {
     use conductor_devices::{Phase, Startup};
     let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
     let mut servo = Servo::new();
-    d.bring_up(Startup::Enable, CTX);
-    let mut t = 1;
-    while d.status().phase != Phase::Enabled {
-        servo.tick(&mut d, t, false);
-        t += 1;
-        assert!(t < 100, "brought up and enabled: {:?}", d.status());
-    }
+    let mut t = enabled(&mut d, &mut servo);
     // The bus goes and comes back; the servo, torque on, moves 3 steps a tick (4 ms)
     // throughout, and the line loses every read of Torque Enable for 20 ticks of the enable.
     d.bus_lost();
@@ -399,6 +383,16 @@ fn enabled(d: &mut DynamixelX, servo: &mut Servo) -> u64 {
     t
 }
 
+/// Brought up and enabled, then tripped by a watchdog (holding, confirmed); returns the next
+/// tick.
+fn tripped(d: &mut DynamixelX, servo: &mut Servo) -> u64 {
+    let t = enabled(d, servo);
+    servo.tick(d, t, true);
+    servo.tick(d, t + 1, false);
+    assert_eq!(d.status().phase, conductor_devices::Phase::Holding);
+    t + 2
+}
+
 /// An enable asked for while the bus is gone is remembered, not sent to a bus that is not
 /// there (where it would be given up: "did not switch on"); the servo is enabled once the bus
 /// is back and it has been brought up again.
@@ -407,11 +401,8 @@ fn an_enable_while_the_bus_is_gone_waits_for_the_bus() {
     use conductor_devices::{Phase, Startup};
     let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
     let mut servo = Servo::new();
-    let mut t = enabled(&mut d, &mut servo);
     // The controller dies: the trip holds it; then the bus goes.
-    servo.tick(&mut d, t, true);
-    t += 1;
-    servo.tick(&mut d, t, false);
+    let mut t = tripped(&mut d, &mut servo);
     d.bus_lost();
     servo.unplugged = true;
     // A new controller enables it meanwhile.
@@ -441,10 +432,7 @@ fn an_enable_during_bring_up_does_not_skip_the_configuration() {
     use conductor_devices::{Phase, Startup};
     let mut d = DynamixelX::new(Credential::id(1), DxlXConfig::default());
     let mut servo = Servo::new();
-    let mut t = enabled(&mut d, &mut servo);
-    servo.tick(&mut d, t, true);
-    t += 1;
-    servo.tick(&mut d, t, false);
+    let mut t = tripped(&mut d, &mut servo);
     // The bus went and came back: a tripped device is brought up again, to hold.
     d.bus_lost();
     d.bring_up(Startup::Enable, CTX);
