@@ -2,17 +2,9 @@
 //! corpora, without cargo-fuzz or nightly (conductor-testkit's `fuzz`), and the synthetic
 //! recordings the `recording` target starts from.
 
-#[allow(dead_code)]
-#[path = "../fuzz/src/lib.rs"]
-mod fuzz;
+conductor_testkit::fuzz_corpus_test!();
 
 use std::path::Path;
-
-#[test]
-fn every_fuzz_target_passes_its_seed_and_regression_corpora() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz");
-    conductor_testkit::fuzz::replay_corpora(&dir, fuzz::TARGETS);
-}
 
 /// Small recordings in the documented layout (two states; unchunked, chunked and zstd-chunked),
 /// the starting points of the `recording` target. `UPDATE_FUZZ_SEEDS=1` writes them into
