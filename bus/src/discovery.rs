@@ -37,18 +37,7 @@ impl StateInfo {
     /// Its metadata as strings, one entry per attribute plus `subsystem` and `state`: what a
     /// recording's channel and a live view's channel carry.
     pub fn metadata_strings(&self) -> std::collections::BTreeMap<String, String> {
-        let m = &self.meta;
-        std::collections::BTreeMap::from([
-            ("subsystem".into(), self.subsystem.clone()),
-            ("state".into(), self.name.clone()),
-            ("index".into(), m.index.to_string()),
-            ("units".into(), m.units.clone()),
-            ("writable".into(), m.writable.to_string()),
-            ("rate_hz".into(), m.rate_hz.to_string()),
-            ("min".into(), m.min.to_string()),
-            ("max".into(), m.max.to_string()),
-            ("device".into(), m.device.clone()),
-        ])
+        self.meta.strings(&self.subsystem, &self.name)
     }
 
     /// The iceoryx2 service name.
@@ -76,7 +65,7 @@ impl Bus {
             let Some((sub, name)) = naming::split(stat.name().as_str()) else {
                 return CallbackProgression::Continue;
             };
-            let Some(meta) = StateMeta::from_attributes(attrs) else {
+            let Some(meta) = metadata::state_meta_from_attributes(attrs) else {
                 return CallbackProgression::Continue;
             };
             let nodes = details

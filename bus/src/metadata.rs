@@ -73,38 +73,7 @@ impl ServiceKind {
     }
 }
 
-/// Everything a client needs to know about a state besides its name.
-#[derive(Debug, Clone, PartialEq)]
-pub struct StateMeta {
-    /// Index within the subsystem; setpoints address the state by it.
-    pub index: u32,
-    /// Units, e.g. `rad`.
-    pub units: String,
-    /// Whether the state accepts setpoints.
-    pub writable: bool,
-    /// Publish rate (Hz).
-    pub rate_hz: f64,
-    /// Lower limit for setpoints (setpoints below are clamped and flagged).
-    pub min: f64,
-    /// Upper limit for setpoints.
-    pub max: f64,
-    /// Owning device, for display.
-    pub device: String,
-}
-
-impl Default for StateMeta {
-    fn default() -> Self {
-        Self {
-            index: 0,
-            units: String::new(),
-            writable: false,
-            rate_hz: 0.0,
-            min: f64::NEG_INFINITY,
-            max: f64::INFINITY,
-            device: String::new(),
-        }
-    }
-}
+pub use conductor_bus_meta::StateMeta;
 
 fn key(k: &str) -> Result<AttributeKey> {
     k.try_into()
@@ -163,53 +132,45 @@ fn fmt_limit(x: f64) -> String {
     }
 }
 
-impl StateMeta {
-    /// The full attribute set of a state service.
-    pub(crate) fn to_attributes(&self) -> Result<AttributeSpecifier> {
-        let mut spec = base_attributes(ServiceKind::State)?;
-        spec = define(spec, KEY_INDEX, &self.index.to_string())?;
-        // iceoryx2 rejects empty values: absent means empty.
-        if !self.units.is_empty() {
-            spec = define(spec, KEY_UNITS, &self.units)?;
-        }
-        spec = define(
-            spec,
-            KEY_WRITABLE,
-            if self.writable { "true" } else { "false" },
-        )?;
-        spec = define(spec, KEY_RATE, &format!("{}", self.rate_hz))?;
-        spec = define(
-            spec,
-            KEY_LIMITS,
-            &format!("{},{}", fmt_limit(self.min), fmt_limit(self.max)),
-        )?;
-        if !self.device.is_empty() {
-            spec = define(spec, KEY_DEVICE, &self.device)?;
-        }
-        Ok(spec)
+/// The full attribute set of a state service.
+pub(crate) fn state_attributes(meta: &StateMeta) -> Result<AttributeSpecifier> {
+    let mut spec = base_attributes(ServiceKind::State)?;
+    spec = define(spec, KEY_INDEX, &meta.index.to_string())?;
+    // iceoryx2 rejects empty values: absent means empty.
+    if !meta.units.is_empty() {
+        spec = define(spec, KEY_UNITS, &meta.units)?;
     }
+    spec = define(
+        spec,
+        KEY_WRITABLE,
+        if meta.writable { "true" } else { "false" },
+    )?;
+    spec = define(spec, KEY_RATE, &format!("{}", meta.rate_hz))?;
+    spec = define(
+        spec,
+        KEY_LIMITS,
+        &format!("{},{}", fmt_limit(meta.min), fmt_limit(meta.max)),
+    )?;
+    if !meta.device.is_empty() {
+        spec = define(spec, KEY_DEVICE, &meta.device)?;
+    }
+    Ok(spec)
+}
 
-    /// Reads the metadata back from a service's attributes; `None` if a required key is missing
-    /// or malformed (i.e. this is not a Conductor state service).
-    pub fn from_attributes(attrs: &AttributeSet) -> Option<Self> {
-        let limits = get(attrs, KEY_LIMITS)?;
-        let (min, max) = limits.split_once(',')?;
-        Some(Self {
-            index: get(attrs, KEY_INDEX)?.parse().ok()?,
-            units: get(attrs, KEY_UNITS).unwrap_or_default(),
-            writable: get(attrs, KEY_WRITABLE)? == "true",
-            rate_hz: get(attrs, KEY_RATE)?.parse().ok()?,
-            min: min.trim().parse().ok()?,
-            max: max.trim().parse().ok()?,
-            device: get(attrs, KEY_DEVICE).unwrap_or_default(),
-        })
-    }
-
-    /// Clamps `v` to the limits; returns the value and whether it was clamped.
-    pub fn clamp(&self, v: f64) -> (f64, bool) {
-        let c = v.clamp(self.min, self.max);
-        (c, c != v)
-    }
+/// Reads a state's metadata back from its service's attributes; `None` if a required key is
+/// missing or malformed (i.e. this is not a Conductor state service).
+pub fn state_meta_from_attributes(attrs: &AttributeSet) -> Option<StateMeta> {
+    let limits = get(attrs, KEY_LIMITS)?;
+    let (min, max) = limits.split_once(',')?;
+    Some(StateMeta {
+        index: get(attrs, KEY_INDEX)?.parse().ok()?,
+        units: get(attrs, KEY_UNITS).unwrap_or_default(),
+        writable: get(attrs, KEY_WRITABLE)? == "true",
+        rate_hz: get(attrs, KEY_RATE)?.parse().ok()?,
+        min: min.trim().parse().ok()?,
+        max: max.trim().parse().ok()?,
+        device: get(attrs, KEY_DEVICE).unwrap_or_default(),
+    })
 }
 
 /// First value of attribute `k`, as a string.
@@ -233,20 +194,20 @@ mod tests {
             max: f64::INFINITY,
             device: "dRAR".into(),
         };
-        let spec = m.to_attributes().unwrap();
+        let spec = state_attributes(&m).unwrap();
         let attrs = spec.attributes();
         assert_eq!(attrs.number_of_attributes(), 8);
         assert_eq!(get(attrs, KEY_KIND).as_deref(), Some("state"));
         assert_eq!(get(attrs, KEY_ABI).as_deref(), Some("2"));
-        assert_eq!(StateMeta::from_attributes(attrs), Some(m));
+        assert_eq!(state_meta_from_attributes(attrs), Some(m));
     }
 
     #[test]
     fn empty_units_and_device_are_omitted() {
         let m = StateMeta::default();
-        let spec = m.to_attributes().unwrap();
+        let spec = state_attributes(&m).unwrap();
         assert_eq!(spec.attributes().number_of_attributes(), 6);
-        assert_eq!(StateMeta::from_attributes(spec.attributes()), Some(m));
+        assert_eq!(state_meta_from_attributes(spec.attributes()), Some(m));
     }
 
     #[test]

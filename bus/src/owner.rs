@@ -16,7 +16,9 @@ use crate::abi::{CommandFrame, ExecutorStats, StateSample};
 use crate::bus::{qos, Bus, EventService, StateService};
 use crate::clock::monotonic_ns;
 use crate::error::{BusError, Result};
-use crate::metadata::{base_attributes, command_attributes, ServiceKind, StateMeta};
+use crate::metadata::{
+    base_attributes, command_attributes, state_attributes, ServiceKind, StateMeta,
+};
 use crate::naming;
 use crate::variant::RtIpc;
 
@@ -98,7 +100,7 @@ impl StatePublisher {
                 });
             }
             let name = naming::state(subsystem, &spec.name);
-            let attrs = spec.meta.to_attributes()?;
+            let attrs = state_attributes(&spec.meta)?;
             let service = bus.create_or_reopen_pubsub::<StateSample>(&name, &attrs, |b| {
                 qos::state_service(b, spec.buffer)
             })?;

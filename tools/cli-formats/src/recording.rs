@@ -14,6 +14,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+pub use conductor_bus_meta::StateMeta;
 use mcap::sans_io::MessageReadEvent;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
@@ -177,27 +178,7 @@ pub struct Channel {
     /// State name.
     pub state: String,
     /// Metadata as recorded.
-    pub meta: ChannelMeta,
-}
-
-/// A recorded state's metadata: the fields of the bus's `StateMeta`, read from the channel
-/// metadata `record` writes (the state's bus metadata as strings).
-#[derive(Debug, Clone, PartialEq)]
-pub struct ChannelMeta {
-    /// Index within the subsystem when recorded.
-    pub index: u32,
-    /// Units, e.g. `rad`.
-    pub units: String,
-    /// Whether the state accepted setpoints.
-    pub writable: bool,
-    /// Publish rate (Hz).
-    pub rate_hz: f64,
-    /// Lower setpoint limit.
-    pub min: f64,
-    /// Upper setpoint limit.
-    pub max: f64,
-    /// Owning device (may be empty).
-    pub device: String,
+    pub meta: StateMeta,
 }
 
 impl Channel {
@@ -237,7 +218,7 @@ impl Channel {
         Ok(Self {
             subsystem: get("subsystem")?.clone(),
             state: get("state")?.clone(),
-            meta: ChannelMeta {
+            meta: StateMeta {
                 index: num("index")? as u32,
                 units: get("units")?.clone(),
                 writable: get("writable")? == "true",

@@ -31,6 +31,7 @@ use conductor_bus::{
 };
 
 use crate::error::{CliError, Result};
+use crate::netns::VethPair;
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -59,68 +60,8 @@ fn me() -> Result<std::path::PathBuf> {
     std::env::current_exe().map_err(|e| CliError::os("finding my own program", e))
 }
 
-struct Netns {
-    ns: [String; 2],
-    addr: [String; 2],
-}
-
-impl Netns {
-    fn make() -> std::result::Result<Self, String> {
-        let pid = std::process::id();
-        let ns = [format!("cdr-bba-{pid}"), format!("cdr-bbb-{pid}")];
-        let veth = [
-            format!("cbba{}", pid % 100_000),
-            format!("cbbb{}", pid % 100_000),
-        ];
-        let net = 1 + pid % 250;
-        let addr = [format!("10.214.{net}.1"), format!("10.214.{net}.2")];
-        let me = Netns {
-            ns: ns.clone(),
-            addr: addr.clone(),
-        };
-        let ip = |args: &[&str]| -> std::result::Result<(), String> {
-            let o = Command::new("ip")
-                .args(args)
-                .output()
-                .map_err(|e| e.to_string())?;
-            o.status
-                .success()
-                .then_some(())
-                .ok_or_else(|| String::from_utf8_lossy(&o.stderr).trim().to_string())
-        };
-        ip(&["netns", "add", &ns[0]])?;
-        ip(&["netns", "add", &ns[1]])?;
-        ip(&[
-            "link", "add", &veth[0], "type", "veth", "peer", "name", &veth[1],
-        ])?;
-        for i in 0..2 {
-            ip(&["link", "set", &veth[i], "netns", &ns[i]])?;
-            ip(&[
-                "-n",
-                &ns[i],
-                "addr",
-                "add",
-                &format!("{}/30", addr[i]),
-                "dev",
-                &veth[i],
-            ])?;
-            ip(&["-n", &ns[i], "link", "set", &veth[i], "up"])?;
-            ip(&["-n", &ns[i], "link", "set", "lo", "up"])?;
-        }
-        Ok(me)
-    }
-}
-
-impl Drop for Netns {
-    fn drop(&mut self) {
-        for n in &self.ns {
-            let _ = Command::new("ip").args(["netns", "delete", n]).output();
-        }
-    }
-}
-
 struct Sides {
-    netns: Option<Netns>,
+    netns: Option<VethPair>,
     port: u16,
 }
 
@@ -443,7 +384,7 @@ pub fn run(o: &Options) -> Result<Report> {
     // SAFETY: geteuid has no preconditions.
     let root = unsafe { libc::geteuid() } == 0;
     let netns = if root && !o.loopback {
-        match Netns::make() {
+        match VethPair::make("bb", 214) {
             Ok(n) => Some(n),
             Err(e) => {
                 eprintln!("bench --bridge: no network namespaces ({e}); using loopback");

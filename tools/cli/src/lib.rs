@@ -23,6 +23,7 @@ pub mod get_set;
 pub mod launch;
 pub mod list;
 pub mod live_plot;
+pub mod netns;
 pub mod out;
 pub mod plot;
 mod probe;

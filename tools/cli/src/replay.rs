@@ -15,7 +15,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::cli::ReplayArgs;
 use crate::error::{CliError, Result};
 use crate::probe::Probe;
-use crate::recording::{pass_ns, ChannelMeta, Recording, RecordingError};
+use crate::recording::{pass_ns, Recording, RecordingError};
 use crate::select::Selector;
 
 /// What a replay did.
@@ -92,19 +92,6 @@ fn refuse_live_states(
     )))
 }
 
-/// The bus metadata of a recorded state.
-fn state_meta(m: &ChannelMeta) -> StateMeta {
-    StateMeta {
-        index: m.index,
-        units: m.units.clone(),
-        writable: m.writable,
-        rate_hz: m.rate_hz,
-        min: m.min,
-        max: m.max,
-        device: m.device.clone(),
-    }
-}
-
 /// Replays until the end (or, with `--loop`, until Ctrl-C).
 pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
     if !(args.rate_scale > 0.0 && args.rate_scale.is_finite()) {
@@ -161,7 +148,7 @@ pub fn run(bus: &Bus, args: &ReplayArgs) -> Result<ReplayReport> {
         let meta = StateMeta {
             index: specs.len() as u32,
             writable: false,
-            ..state_meta(&c.meta)
+            ..c.meta.clone()
         };
         routes.push(Some(Route {
             publisher: p,

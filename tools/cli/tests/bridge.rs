@@ -19,6 +19,7 @@ use conductor_bridge::zenoh::{self, Wait};
 use conductor_bus::{
     status, Bus, CommandFrame, CommandSender, Controller, Domain, StateSample, StateSubscriber,
 };
+use conductor_cli::netns::VethPair;
 use support::*;
 
 const HEARTBEAT_MS: u64 = 50;
@@ -147,71 +148,19 @@ enum Link {
     /// Both on 127.0.0.1; the exporting bridge is frozen for the cut.
     Loopback { port: u16 },
     /// Each in its own network namespace, joined by a veth pair; the veth goes down for the cut.
-    Netns {
-        ns: [String; 2],
-        veth: [String; 2],
-        addr: [String; 2],
-    },
-}
-
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .map_err(|e| format!("ip: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!(
-            "ip {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ))
-    }
+    Netns(VethPair),
 }
 
 impl Link {
     fn netns() -> Result<Self, String> {
-        let pid = std::process::id();
-        let ns = [format!("cdr-bra-{pid}"), format!("cdr-brb-{pid}")];
-        let veth = [
-            format!("cbra{}", pid % 100_000),
-            format!("cbrb{}", pid % 100_000),
-        ];
-        let net = 1 + pid % 250;
-        let addr = [format!("10.213.{net}.1"), format!("10.213.{net}.2")];
-        let link = Link::Netns {
-            ns: ns.clone(),
-            veth: veth.clone(),
-            addr: addr.clone(),
-        };
-        ip(&["netns", "add", &ns[0]])?;
-        ip(&["netns", "add", &ns[1]])?;
-        ip(&[
-            "link", "add", &veth[0], "type", "veth", "peer", "name", &veth[1],
-        ])?;
-        for i in 0..2 {
-            ip(&["link", "set", &veth[i], "netns", &ns[i]])?;
-            ip(&[
-                "-n",
-                &ns[i],
-                "addr",
-                "add",
-                &format!("{}/30", addr[i]),
-                "dev",
-                &veth[i],
-            ])?;
-            ip(&["-n", &ns[i], "link", "set", &veth[i], "up"])?;
-            ip(&["-n", &ns[i], "link", "set", "lo", "up"])?;
-        }
-        Ok(link)
+        VethPair::make("br", 213).map(Link::Netns)
     }
 
     /// The endpoint bridge `i` listens on.
     fn endpoint(&self, i: usize) -> String {
         match self {
             Link::Loopback { port } => format!("tcp/127.0.0.1:{}", port + i as u16),
-            Link::Netns { addr, .. } => format!("tcp/{}:7447", addr[i]),
+            Link::Netns(n) => format!("tcp/{}:7447", n.addr[i]),
         }
     }
 
@@ -219,9 +168,9 @@ impl Link {
     fn conductor(&self, i: usize, d: &Domain) -> Command {
         let mut c = match self {
             Link::Loopback { .. } => Command::new(env!("CARGO_BIN_EXE_conductor")),
-            Link::Netns { ns, .. } => {
+            Link::Netns(n) => {
                 let mut c = Command::new("ip");
-                c.args(["netns", "exec", &ns[i], env!("CARGO_BIN_EXE_conductor")]);
+                c.args(["netns", "exec", &n.ns[i], env!("CARGO_BIN_EXE_conductor")]);
                 c
             }
         };
@@ -232,29 +181,14 @@ impl Link {
     fn cut(&self, exporter: &Proc) {
         match self {
             Link::Loopback { .. } => exporter.signal(libc::SIGSTOP),
-            Link::Netns { ns, veth, .. } => {
-                ip(&["-n", &ns[0], "link", "set", &veth[0], "down"]).unwrap()
-            }
+            Link::Netns(n) => n.set_link(false).unwrap(),
         }
     }
 
     fn restore(&self, exporter: &Proc) {
         match self {
             Link::Loopback { .. } => exporter.signal(libc::SIGCONT),
-            Link::Netns { ns, veth, .. } => {
-                ip(&["-n", &ns[0], "link", "set", &veth[0], "up"]).unwrap()
-            }
-        }
-    }
-}
-
-impl Drop for Link {
-    fn drop(&mut self) {
-        if let Link::Netns { ns, .. } = self {
-            // Deleting a namespace deletes the veth end inside it, and so the pair.
-            for n in ns.iter() {
-                let _ = ip(&["netns", "delete", n]);
-            }
+            Link::Netns(n) => n.set_link(true).unwrap(),
         }
     }
 }
@@ -341,6 +275,13 @@ struct Seen {
     s: StateSample,
 }
 
+/// Which domain's subscriber: the owner's (`a`) or the mirror's (`b`).
+#[derive(Clone, Copy)]
+enum Side {
+    A,
+    B,
+}
+
 /// Both sides' knee samples, read continuously while waiting for something.
 struct Recorder {
     a: StateSubscriber,
@@ -350,6 +291,28 @@ struct Recorder {
 }
 
 impl Recorder {
+    /// Reads until `side` has a sample read at or after `since` that `pred` accepts; returns
+    /// when the first such sample was read.
+    fn first(
+        &mut self,
+        side: Side,
+        since: Instant,
+        pred: impl Fn(&StateSample) -> bool,
+        what: &str,
+    ) -> Instant {
+        let at = |a: &[Seen], b: &[Seen]| {
+            let seen = match side {
+                Side::A => a,
+                Side::B => b,
+            };
+            seen.iter()
+                .find(|x| x.at >= since && pred(&x.s))
+                .map(|x| x.at)
+        };
+        self.until(|a, b| at(a, b).is_some(), PATIENCE, what);
+        at(&self.seen_a, &self.seen_b).unwrap()
+    }
+
     fn until(&mut self, pred: impl Fn(&[Seen], &[Seen]) -> bool, timeout: Duration, what: &str) {
         let end = Instant::now() + timeout;
         loop {
@@ -397,42 +360,51 @@ fn counter(summary: &str, name: &str) -> u64 {
     panic!("no {name} in {line}");
 }
 
+/// `bridge --host HOST LINK…` exporting the leg's states and taking remote commands for the
+/// knee, with heartbeat [`HEARTBEAT_MS`]; `link` are its Zenoh options.
+fn exporter_args(host: &str, link: &[&str]) -> Vec<String> {
+    let mut v = vec!["bridge", "--host", host];
+    v.extend(link);
+    v.extend([
+        "--export",
+        "leg/*",
+        "--commands",
+        "leg/knee",
+        "--heartbeat-ms",
+    ]);
+    let mut v: Vec<String> = v.into_iter().map(str::to_string).collect();
+    v.push(HEARTBEAT_MS.to_string());
+    v
+}
+
+/// `bridge --host HOST LINK…` importing the states of domain `from`, with heartbeat
+/// [`HEARTBEAT_MS`]; `link` are its Zenoh options.
+fn importer_args(host: &str, link: &[&str], from: &Domain) -> Vec<String> {
+    let mut v = vec!["bridge", "--host", host];
+    v.extend(link);
+    v.extend(["--import", from.name(), "--heartbeat-ms"]);
+    let mut v: Vec<String> = v.into_iter().map(str::to_string).collect();
+    v.push(HEARTBEAT_MS.to_string());
+    v
+}
+
 /// The scenarios run one at a time: their timing bounds assume the machine is not running two.
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
 /// `spin_us`: the exporting bridge's `--spin-us` (busy-wait before expected ticks), if any.
 fn scenario(link: Link, tag: &str, inject: bool, spin_us: Option<u64>) {
     let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let a = Domain::unique(&format!("{tag}a")).unwrap();
-    let b = Domain::unique(&format!("{tag}b")).unwrap();
-    let dir = tempdir(tag);
-    let m = dir.join("leg.toml");
-    std::fs::write(&m, manifest()).unwrap();
-    let launcher = Proc::spawn(
-        conductor(&a)
-            .arg("launch")
-            .arg(&m)
-            .args(["--no-rt", "--quiet"]),
-    );
-    let bus_a = Bus::open(&a, "test-a").unwrap();
-    let bus_b = Bus::open(&b, "test-b").unwrap();
-    wait_listed(&bus_a, "leg/knee", Duration::from_secs(30));
+    let Leg {
+        a,
+        b,
+        dir,
+        bus_a,
+        bus_b,
+        _launcher: launcher,
+    } = launch_leg(tag);
 
-    let hb = HEARTBEAT_MS.to_string();
     let mut ex = link.conductor(0, &a);
-    ex.args([
-        "bridge",
-        "--host",
-        "hosta",
-        "--listen",
-        &link.endpoint(0),
-        "--export",
-        "leg/*",
-        "--commands",
-        "leg/knee",
-        "--heartbeat-ms",
-        &hb,
-    ]);
+    ex.args(exporter_args("hosta", &["--listen", &link.endpoint(0)]));
     if let Some(us) = spin_us {
         ex.arg("--spin-us").arg(us.to_string());
     }
@@ -441,19 +413,16 @@ fn scenario(link: Link, tag: &str, inject: bool, spin_us: Option<u64>) {
         "ready bridge hosta: exporting 2 state(s)",
         Duration::from_secs(30),
     );
-    let importer = Proc::spawn(link.conductor(1, &b).args([
-        "bridge",
-        "--host",
+    let importer = Proc::spawn(link.conductor(1, &b).args(importer_args(
         "hostb",
-        "--connect",
-        &link.endpoint(0),
-        "--listen",
-        &link.endpoint(1),
-        "--import",
-        a.name(),
-        "--heartbeat-ms",
-        &hb,
-    ]));
+        &[
+            "--connect",
+            &link.endpoint(0),
+            "--listen",
+            &link.endpoint(1),
+        ],
+        &a,
+    )));
     importer.wait_line("ready bridge hostb", Duration::from_secs(30));
 
     // Discovery: the mirrors exist in B, owned by host a.
@@ -618,34 +587,18 @@ fn scenario(link: Link, tag: &str, inject: bool, spin_us: Option<u64>) {
     // Cut the link for 2 s.
     let t_cut = Instant::now();
     link.cut(&exporter);
-    rec.until(
-        |_, b| {
-            b.iter()
-                .any(|x| x.at >= t_cut && x.s.status & status::STALE != 0)
-        },
-        PATIENCE,
+    let t_stale = rec.first(
+        Side::B,
+        t_cut,
+        |s| s.status & status::STALE != 0,
         "mirrors marked STALE",
     );
-    let t_stale = rec
-        .seen_b
-        .iter()
-        .find(|x| x.at >= t_cut && x.s.status & status::STALE != 0)
-        .unwrap()
-        .at;
-    rec.until(
-        |a, _| {
-            a.iter()
-                .any(|x| x.at >= t_cut && x.s.status & status::WATCHDOG != 0)
-        },
-        PATIENCE,
+    let t_wd = rec.first(
+        Side::A,
+        t_cut,
+        |s| s.status & status::WATCHDOG != 0,
         "the owner's watchdog",
     );
-    let t_wd = rec
-        .seen_a
-        .iter()
-        .find(|x| x.at >= t_cut && x.s.status & status::WATCHDOG != 0)
-        .unwrap()
-        .at;
     let rest = Duration::from_secs(2).saturating_sub(t_cut.elapsed());
     rec.until(
         |_, _| t_cut.elapsed() >= Duration::from_secs(2),
@@ -654,20 +607,12 @@ fn scenario(link: Link, tag: &str, inject: bool, spin_us: Option<u64>) {
     );
     let t_restore = Instant::now();
     link.restore(&exporter);
-    rec.until(
-        |_, b| {
-            b.iter()
-                .any(|x| x.at >= t_restore && x.s.status & status::STALE == 0)
-        },
-        PATIENCE,
+    let t_resume = rec.first(
+        Side::B,
+        t_restore,
+        |s| s.status & status::STALE == 0,
         "flow after the restore",
     );
-    let t_resume = rec
-        .seen_b
-        .iter()
-        .find(|x| x.at >= t_restore && x.s.status & status::STALE == 0)
-        .unwrap()
-        .at;
     let t_end = Instant::now() + Duration::from_millis(500);
     rec.until(
         |_, _| Instant::now() >= t_end,
@@ -1023,38 +968,28 @@ fn mutual_tls_and_access_control_of_the_two_host_example() {
 
     let port = free_tcp_ports(2);
     let robot_ep = format!("tls/localhost:{port}");
-    let hb = HEARTBEAT_MS.to_string();
-    let robot = Proc::spawn(conductor(&leg.a).args([
-        "bridge",
-        "--host",
+    let robot = Proc::spawn(conductor(&leg.a).args(exporter_args(
         "robot",
-        "--zenoh-config",
-        robot_cfg.to_str().unwrap(),
-        "--listen",
-        &robot_ep,
-        "--export",
-        "leg/*",
-        "--commands",
-        "leg/knee",
-        "--heartbeat-ms",
-        &hb,
-    ]));
+        &[
+            "--zenoh-config",
+            robot_cfg.to_str().unwrap(),
+            "--listen",
+            &robot_ep,
+        ],
+    )));
     robot.wait_line("ready bridge robot", Duration::from_secs(30));
-    let workstation = Proc::spawn(conductor(&leg.b).args([
-        "bridge",
-        "--host",
+    let workstation = Proc::spawn(conductor(&leg.b).args(importer_args(
         "workstation",
-        "--zenoh-config",
-        ws_cfg.to_str().unwrap(),
-        "--connect",
-        &robot_ep,
-        "--listen",
-        &format!("tls/localhost:{}", port + 1),
-        "--import",
-        leg.a.name(),
-        "--heartbeat-ms",
-        &hb,
-    ]));
+        &[
+            "--zenoh-config",
+            ws_cfg.to_str().unwrap(),
+            "--connect",
+            &robot_ep,
+            "--listen",
+            &format!("tls/localhost:{}", port + 1),
+        ],
+        &leg.a,
+    )));
     workstation.wait_line("ready bridge workstation", Duration::from_secs(30));
     leg.states_flow_and_commands_go_back(0.5);
 
@@ -1129,33 +1064,15 @@ fn through_a_zenoh_router_with_bridges_in_client_mode() {
         ),
     )
     .unwrap();
-    let hb = HEARTBEAT_MS.to_string();
     let cfg = client.to_str().unwrap();
-    let exporter = Proc::spawn(conductor(&leg.a).args([
-        "bridge",
-        "--host",
-        "hosta",
-        "--zenoh-config",
-        cfg,
-        "--export",
-        "leg/*",
-        "--commands",
-        "leg/knee",
-        "--heartbeat-ms",
-        &hb,
-    ]));
+    let exporter =
+        Proc::spawn(conductor(&leg.a).args(exporter_args("hosta", &["--zenoh-config", cfg])));
     exporter.wait_line("ready bridge hosta", Duration::from_secs(30));
-    let importer = Proc::spawn(conductor(&leg.b).args([
-        "bridge",
-        "--host",
+    let importer = Proc::spawn(conductor(&leg.b).args(importer_args(
         "hostb",
-        "--zenoh-config",
-        cfg,
-        "--import",
-        leg.a.name(),
-        "--heartbeat-ms",
-        &hb,
-    ]));
+        &["--zenoh-config", cfg],
+        &leg.a,
+    )));
     importer.wait_line("ready bridge hostb", Duration::from_secs(30));
     leg.states_flow_and_commands_go_back(-0.25);
     importer.stop();

@@ -2,17 +2,11 @@
 //! corpora, without cargo-fuzz or nightly (conductor-testkit's `fuzz`), and the synthetic
 //! recordings the `recording` target starts from.
 
-#[allow(dead_code)]
-#[path = "../fuzz/src/lib.rs"]
-mod fuzz;
+conductor_testkit::fuzz_corpus_test!();
+
+mod support;
 
 use std::path::Path;
-
-#[test]
-fn every_fuzz_target_passes_its_seed_and_regression_corpora() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz");
-    conductor_testkit::fuzz::replay_corpora(&dir, fuzz::TARGETS);
-}
 
 /// Small recordings in the documented layout (two states; unchunked, chunked and zstd-chunked),
 /// the starting points of the `recording` target. `UPDATE_FUZZ_SEEDS=1` writes them into
@@ -20,7 +14,6 @@ fn every_fuzz_target_passes_its_seed_and_regression_corpora() {
 #[test]
 fn synthetic_recordings_load_and_pass_the_recording_check() {
     use conductor_cli::recording::{self as r, Recording};
-    use std::collections::BTreeMap;
     let make = |chunked: bool, zstd: bool| -> Vec<u8> {
         let mut buf = std::io::Cursor::new(Vec::new());
         let mut w = mcap::WriteOptions::new()
@@ -33,23 +26,7 @@ fn synthetic_recordings_load_and_pass_the_recording_check() {
             .add_schema(r::SCHEMA_NAME, r::SCHEMA_ENCODING, r::SCHEMA.as_bytes())
             .unwrap();
         for (n, state) in ["knee", "hip"].into_iter().enumerate() {
-            let md: BTreeMap<String, String> = [
-                ("subsystem", "leg"),
-                ("state", state),
-                ("index", if n == 0 { "0" } else { "1" }),
-                ("units", "rad"),
-                ("writable", "true"),
-                ("rate_hz", "100"),
-                ("min", "-3"),
-                ("max", "3"),
-                ("device", "d1"),
-            ]
-            .into_iter()
-            .map(|(k, v)| (k.to_string(), v.to_string()))
-            .collect();
-            let ch = w
-                .add_channel(schema, &format!("/leg/{state}"), r::MESSAGE_ENCODING, &md)
-                .unwrap();
+            let ch = support::add_state_channel(&mut w, schema, "leg", state, n as u32);
             for i in 0..3u64 {
                 let t = 1_000_000_000 + i * 10_000_000 + n as u64;
                 let value = if i == 2 { "null" } else { "0.5" };
@@ -57,16 +34,7 @@ fn synthetic_recordings_load_and_pass_the_recording_check() {
                     r#"{{"value":{value},"status":{i},"t_sample":{},"seq":{i},"tick":{i}}}"#,
                     t as f64 * 1e-9
                 );
-                w.write_to_known_channel(
-                    &mcap::records::MessageHeader {
-                        channel_id: ch,
-                        sequence: i as u32,
-                        log_time: t,
-                        publish_time: t,
-                    },
-                    body.as_bytes(),
-                )
-                .unwrap();
+                support::write_sample(&mut w, ch, i, t, body.as_bytes());
             }
         }
         w.finish().unwrap();

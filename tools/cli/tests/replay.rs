@@ -189,36 +189,11 @@ fn synthetic(path: &Path, n: u64) {
     let schema = w
         .add_schema(r::SCHEMA_NAME, r::SCHEMA_ENCODING, r::SCHEMA.as_bytes())
         .unwrap();
-    let md: BTreeMap<String, String> = [
-        ("subsystem", "arm"),
-        ("state", "elbow"),
-        ("index", "4"),
-        ("units", "rad"),
-        ("writable", "true"),
-        ("rate_hz", "100"),
-        ("min", "-3"),
-        ("max", "3"),
-        ("device", "d1"),
-    ]
-    .into_iter()
-    .map(|(k, v)| (k.to_string(), v.to_string()))
-    .collect();
-    let ch = w
-        .add_channel(schema, "/arm/elbow", r::MESSAGE_ENCODING, &md)
-        .unwrap();
+    let ch = add_state_channel(&mut w, schema, "arm", "elbow", 4);
     for i in 0..n {
         let t = 1_000_000_000 + i * 10_000_000;
         let body = serde_json::json!({"value": i as f64, "status": 0, "t_sample": t as f64 * 1e-9, "seq": i, "tick": i});
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: i as u32,
-                log_time: t,
-                publish_time: t,
-            },
-            body.to_string().as_bytes(),
-        )
-        .unwrap();
+        write_sample(&mut w, ch, i, t, body.to_string().as_bytes());
     }
     w.finish().unwrap();
 }

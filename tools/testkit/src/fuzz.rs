@@ -43,3 +43,21 @@ pub fn replay_corpora(fuzz_dir: &Path, targets: &[(&str, Check)]) {
         }
     }
 }
+
+/// The test every crate with a `fuzz/` folder runs: includes `../fuzz/src/lib.rs` (the targets'
+/// checks and their `TARGETS` table) as module `fuzz` and replays its corpora with
+/// [`replay_corpora`]. Invoke it at the top level of a file in the crate's `tests/`.
+#[macro_export]
+macro_rules! fuzz_corpus_test {
+    () => {
+        #[allow(dead_code)]
+        #[path = "../fuzz/src/lib.rs"]
+        mod fuzz;
+
+        #[test]
+        fn every_fuzz_target_passes_its_seed_and_regression_corpora() {
+            let dir = ::std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz");
+            $crate::fuzz::replay_corpora(&dir, fuzz::TARGETS);
+        }
+    };
+}

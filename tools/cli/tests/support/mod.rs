@@ -184,6 +184,52 @@ pub fn free_udp_ports(n: u16) -> u16 {
     panic!("no block of {n} free UDP ports");
 }
 
+/// Adds, to a synthetic recording, the channel of state `subsystem/state` at `index` (rad,
+/// writable, 100 Hz, limits ±3, device `d1`) in the documented layout, on `schema`.
+pub fn add_state_channel<W: std::io::Write + std::io::Seek>(
+    w: &mut mcap::Writer<W>,
+    schema: u16,
+    subsystem: &str,
+    state: &str,
+    index: u32,
+) -> u16 {
+    let md = StateMeta {
+        index,
+        units: "rad".into(),
+        writable: true,
+        rate_hz: 100.0,
+        min: -3.0,
+        max: 3.0,
+        device: "d1".into(),
+    }
+    .strings(subsystem, state);
+    let topic = conductor_cli::recording::topic(subsystem, state);
+    w.add_channel(
+        schema,
+        &topic,
+        conductor_cli::recording::MESSAGE_ENCODING,
+        &md,
+    )
+    .unwrap()
+}
+
+/// Writes message `seq` of channel `ch` sampled (and published) at `t_ns`.
+pub fn write_sample<W: std::io::Write + std::io::Seek>(
+    w: &mut mcap::Writer<W>,
+    ch: u16,
+    seq: u64,
+    t_ns: u64,
+    body: &[u8],
+) {
+    let header = mcap::records::MessageHeader {
+        channel_id: ch,
+        sequence: seq as u32,
+        log_time: t_ns,
+        publish_time: t_ns,
+    };
+    w.write_to_known_channel(&header, body).unwrap();
+}
+
 /// Runs tests/python/check_mcap.py (official `mcap` reader + `jsonschema`) on a recording.
 pub fn check_with_python(file: &Path) -> Value {
     let out = conductor_testkit::run_ok(
