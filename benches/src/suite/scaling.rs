@@ -15,6 +15,7 @@
 //! Executors sleep to their deadlines (no spin), as in the suite.
 
 use std::path::Path;
+use std::time::Duration;
 
 use serde::Serialize;
 
@@ -354,6 +355,8 @@ fn point_run(
     opts.launch = LaunchOptions {
         quiet: true,
         handle_signals: false,
+        // Bring-up opens a service per state: 1 000 states take longer than the default 10 s.
+        ready_timeout: Duration::from_secs(10) + Duration::from_millis(100) * states as u32,
         ..cfg.helpers.launch.clone()
     };
     stress::run(&sc, &opts).map_err(|source| SuiteError::Stress {
@@ -414,13 +417,16 @@ fn sweep(
     }
 }
 
+/// `(x, latency p50 µs, p99 µs)` of a sweep's points.
+pub type LatencyPoints = Vec<(f64, f64, f64)>;
+
 /// `(x, CPU µs per tick)` and `(x, latency p50 µs, p99 µs)` of a sweep's points (points
 /// without the figure left out).
 pub fn sweep_points(
     idx: &[usize],
     points: &[ScalingPoint],
     x: &impl Fn(&ScalingPoint) -> usize,
-) -> (Vec<(f64, f64)>, Vec<(f64, f64, f64)>) {
+) -> (Vec<(f64, f64)>, LatencyPoints) {
     let mut cpu = Vec::new();
     let mut lat = Vec::new();
     for p in idx.iter().filter_map(|&i| points.get(i)) {
