@@ -135,7 +135,7 @@ impl Summary {
 /// The external logger: subscribes to states and accounts for every sample.
 pub struct Logger {
     subs: Vec<(StateSubscriber, StateReport)>,
-    ticks: Option<TickWaiter>,
+    ticks: Vec<TickWaiter>,
     sine: bool,
     window: (u64, u64),
     trace: Vec<(u64, f64)>,
@@ -150,15 +150,24 @@ impl core::fmt::Debug for Logger {
 }
 
 impl Logger {
-    /// Subscribes to `names` (`subsystem/state`); `sine` enables the sin(t) error columns.
-    /// Samples are counted once a window is set ([`set_window`](Self::set_window)).
-    pub fn new(bus: &Bus, names: &[String], sine: bool) -> Result<Self, conductor_bus::BusError> {
+    /// Subscribes to `names` (`subsystem/state`) with a buffer of `buffer` samples each (at
+    /// most the states' history), and to the tick event of each of their subsystems (up to 16);
+    /// `sine` enables the sin(t) error columns. Samples are counted once a window is set
+    /// ([`set_window`](Self::set_window)).
+    pub fn new(
+        bus: &Bus,
+        names: &[String],
+        sine: bool,
+        buffer: usize,
+    ) -> Result<Self, conductor_bus::BusError> {
         let mut subs = Vec::with_capacity(names.len());
-        let mut ticks = None;
+        let mut ticks = Vec::new();
+        let mut subsystems: Vec<String> = Vec::new();
         for n in names {
-            let s = StateSubscriber::with_buffer(bus, n, 4096)?;
-            if ticks.is_none() {
-                ticks = Some(TickWaiter::new(bus, &s.info().subsystem)?);
+            let s = StateSubscriber::with_buffer(bus, n, buffer.max(1))?;
+            if !subsystems.contains(&s.info().subsystem) {
+                subsystems.push(s.info().subsystem.clone());
+                ticks.push(TickWaiter::new(bus, &s.info().subsystem)?);
             }
             let report = StateReport {
                 name: n.clone(),
@@ -195,15 +204,16 @@ impl Logger {
         &self.trace
     }
 
-    /// Sleeps until the (first) subsystem's next tick, or `timeout`: waking on the tick event
-    /// instead of polling keeps the measured latency that of the bus, not of a poll interval.
+    /// Sleeps until a subsystem's next tick, or `timeout`: waking on the tick events instead of
+    /// polling keeps the measured latency that of the bus, not of a poll interval.
     pub fn wait(&mut self, timeout: std::time::Duration) -> Result<(), conductor_bus::BusError> {
-        match &mut self.ticks {
-            Some(t) => t.wait(timeout).map(|_| ()),
-            None => {
+        match self.ticks.as_mut_slice() {
+            [] => {
                 std::thread::sleep(timeout);
                 Ok(())
             }
+            [t] => t.wait(timeout).map(|_| ()),
+            all => TickWaiter::wait_any(all, timeout).map(|_| ()),
         }
     }
 

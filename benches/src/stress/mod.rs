@@ -34,8 +34,19 @@ pub struct StressConfig {
     pub spin_us: f64,
     /// Number of sine states (the thesis used 3).
     pub states: usize,
-    /// Add the writable [`PROBE_STATE`] on a loopback hardware, for [`CommandProbe`].
+    /// Add the writable [`PROBE_STATE`] on a loopback hardware, for [`CommandProbe`] (on the
+    /// first executor).
     pub probe: bool,
+    /// Executors on the host: subsystems of `states` sine states each, every one its own
+    /// process, all pinned to `cpu` (the scaling curves' executors per host).
+    pub executors: usize,
+    /// Subscribers per sine state, each in a process of its own woken by the tick events: 0 runs
+    /// no logger (no latency then), 1 the logger, n the logger and n − 1 more readers.
+    pub subscribers: usize,
+    /// Each state's history and the subscribers' buffer (samples): a reader that falls this
+    /// far behind loses samples, and the service's shared memory grows with it (× up to
+    /// [`conductor_bus::qos::STATE_SUBSCRIBERS`] subscribers × states).
+    pub history: usize,
 }
 
 impl Default for StressConfig {
@@ -47,48 +58,75 @@ impl Default for StressConfig {
             spin_us: 0.0,
             states: 3,
             probe: false,
+            executors: 1,
+            subscribers: 1,
+            history: 4096,
         }
     }
 }
 
-/// The subsystem name of the stress manifest.
+/// The subsystem name of the stress manifest (its first executor).
 pub const SUBSYSTEM: &str = "stress";
+
+/// The subsystem of executor `i` (0-based): [`SUBSYSTEM`], then `stress1`, `stress2`, ...
+pub fn subsystem(i: usize) -> String {
+    if i == 0 {
+        SUBSYSTEM.to_string()
+    } else {
+        format!("{SUBSYSTEM}{i}")
+    }
+}
+
+/// The subsystems of `cfg`, one per executor.
+pub fn subsystems(cfg: &StressConfig) -> Vec<String> {
+    (0..cfg.executors.max(1)).map(subsystem).collect()
+}
 
 /// The command probe's state (with [`StressConfig::probe`]): writable, on a `loopback` hardware
 /// that answers each sample with the last setpoint written to it.
 pub const PROBE_STATE: &str = "cmd";
 
-/// The names (`subsystem/state`) of the sine states of `cfg`.
+/// The names (`subsystem/state`) of the sine states of `cfg`, executor by executor.
 pub fn sine_states(cfg: &StressConfig) -> Vec<String> {
-    (0..cfg.states)
-        .map(|i| format!("{SUBSYSTEM}/s{i}"))
+    subsystems(cfg)
+        .iter()
+        .flat_map(|sub| (0..cfg.states).map(move |i| format!("{sub}/s{i}")))
         .collect()
 }
 
-/// A one-subsystem manifest: `states` states `s0..` at `rate_hz`, each on its own device of a
-/// `sine` hardware answering sin(t_S) (amplitude 1, 1/2π Hz); with `probe`, also the writable
-/// state [`PROBE_STATE`] on a `loopback` hardware of its own.
+/// The manifest of `cfg`: per executor a subsystem of `states` states `s0..` at `rate_hz`, each
+/// on its own device of a `sine` hardware answering sin(t_S) (amplitude 1, 1/2π Hz); with
+/// `probe`, also the writable state [`PROBE_STATE`] on a `loopback` hardware of its own in the
+/// first subsystem.
 pub fn manifest(cfg: &StressConfig) -> String {
     let mut m = format!(
-        "# The thesis' stress test: {n} sine states at {r} Hz.\nsystem = \"stress\"\n\n\
-         [subsystems.{SUBSYSTEM}]\nrate_hz = {r}\npriority = {p}\nspin_us = {s}\n",
+        "# The thesis' stress test: {e} executor(s) of {n} sine states at {r} Hz.\n\
+         system = \"stress\"\n",
+        e = cfg.executors.max(1),
         n = cfg.states,
         r = cfg.rate_hz,
-        p = cfg.priority,
-        s = cfg.spin_us
     );
-    if let Some(cpu) = cfg.cpu {
-        m += &format!("cpu = {cpu}\n");
-    }
-    m += &format!(
-        "\n[subsystems.{SUBSYSTEM}.hardware.sine]\nkind = \"sine\"\n\n\
-         [subsystems.{SUBSYSTEM}.protocols.sim]\nkind = \"sim\"\nhardware = \"sine\"\n"
-    );
-    for i in 0..cfg.states {
+    for sub in subsystems(cfg) {
         m += &format!(
-            "\n[subsystems.{SUBSYSTEM}.devices.d{i}]\nkind = \"sim\"\nprotocol = \"sim\"\nid = {i}\n\n\
-             [subsystems.{SUBSYSTEM}.states.s{i}]\ndevice = \"d{i}\"\nhistory = 4096\n"
+            "\n[subsystems.{sub}]\nrate_hz = {r}\npriority = {p}\nspin_us = {s}\n",
+            r = cfg.rate_hz,
+            p = cfg.priority,
+            s = cfg.spin_us
         );
+        if let Some(cpu) = cfg.cpu {
+            m += &format!("cpu = {cpu}\n");
+        }
+        m += &format!(
+            "\n[subsystems.{sub}.hardware.sine]\nkind = \"sine\"\n\n\
+             [subsystems.{sub}.protocols.sim]\nkind = \"sim\"\nhardware = \"sine\"\n"
+        );
+        for i in 0..cfg.states {
+            m += &format!(
+                "\n[subsystems.{sub}.devices.d{i}]\nkind = \"sim\"\nprotocol = \"sim\"\nid = {i}\n\n\
+                 [subsystems.{sub}.states.s{i}]\ndevice = \"d{i}\"\nhistory = {h}\n",
+                h = cfg.history.max(1)
+            );
+        }
     }
     if cfg.probe {
         m += &format!(
@@ -97,7 +135,8 @@ pub fn manifest(cfg: &StressConfig) -> String {
              [subsystems.{SUBSYSTEM}.protocols.probe_link]\nkind = \"sim\"\nhardware = \"probe_hw\"\n\n\
              [subsystems.{SUBSYSTEM}.devices.probe_dev]\nkind = \"sim\"\nprotocol = \"probe_link\"\nid = 0\n\n\
              [subsystems.{SUBSYSTEM}.states.{PROBE_STATE}]\ndevice = \"probe_dev\"\nwritable = true\n\
-             history = 4096\n"
+             history = {h}\n",
+            h = cfg.history.max(1)
         );
     }
     m
@@ -138,6 +177,35 @@ mod tests {
         assert_eq!(
             sine_states(&StressConfig::default()),
             ["stress/s0", "stress/s1", "stress/s2"]
+        );
+    }
+
+    #[test]
+    fn each_executor_is_a_subsystem_of_its_own_on_the_same_cpu() {
+        let cfg = StressConfig {
+            states: 2,
+            executors: 3,
+            cpu: Some(1),
+            history: 64,
+            ..Default::default()
+        };
+        let m = Manifest::parse(&manifest(&cfg), "stress.toml").unwrap_or_else(|e| panic!("{e}"));
+        let names: Vec<&str> = m.subsystems.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["stress", "stress1", "stress2"]);
+        for s in &m.subsystems {
+            assert_eq!((s.states.len(), s.cpu), (2, Some(1)));
+            assert!(s.states.iter().all(|st| st.history == 64));
+        }
+        assert_eq!(
+            sine_states(&cfg),
+            [
+                "stress/s0",
+                "stress/s1",
+                "stress1/s0",
+                "stress1/s1",
+                "stress2/s0",
+                "stress2/s1"
+            ]
         );
     }
 }

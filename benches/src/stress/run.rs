@@ -9,9 +9,9 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use conductor_bus::histogram::{bucket_range, Histogram, BUCKETS};
-use conductor_bus::{monotonic_ns, Bus, BusError, Domain, ExecutorStats, StatsSubscriber};
+use conductor_bus::{monotonic_ns, qos, Bus, BusError, Domain, ExecutorStats, StatsSubscriber};
 
-use super::{manifest, parse_line, sine_states, StressConfig, PROBE_STATE, SUBSYSTEM};
+use super::{manifest, parse_line, sine_states, subsystems, StressConfig, PROBE_STATE, SUBSYSTEM};
 use conductor_executor::launcher::{Launch, LaunchError, LaunchOptions};
 
 /// Why a stress run failed.
@@ -107,24 +107,30 @@ pub struct RunResult {
     /// The CPU it was pinned to, if any.
     pub pinned_cpu: Option<usize>,
     /// Executor figures over the window (between two stats messages `window_ns` apart): base
-    /// ticks executed.
+    /// ticks executed, summed over the executors.
     pub ticks: u64,
-    /// Deadlines missed (slots skipped) in the window.
+    /// Deadlines missed (slots skipped) in the window, summed over the executors.
     pub misses: u64,
     /// The same, in successive one-second slices of the window (the last may be shorter); they
     /// sum to `misses`.
     pub misses_by_second: Vec<u64>,
-    /// Tick lateness (wake-up time − deadline) of the window's ticks. Its max is exact when the
-    /// window set the run's record, else the upper bound of its bucket (≤ 12.5 % over).
+    /// Tick lateness (wake-up time − deadline) of the window's ticks, every executor's. Its max
+    /// is exact when the window set the run's record, else the upper bound of its bucket
+    /// (≤ 12.5 % over).
     pub lateness: Histogram,
-    /// Time between the two stats messages (ns).
+    /// Time between the first executor's two stats messages (ns).
     pub window_ns: u64,
-    /// CPU time of the executor process over the window, in % of one CPU (from /proc).
+    /// CPU time of the executor processes over the window, summed, in % of one CPU (from /proc).
     pub cpu_percent: Option<f64>,
+    /// The same CPU time in ns.
+    pub cpu_ns: Option<u64>,
     /// The logger's line per sine state (`key → value`, see [`super::StateReport::line`]).
     pub states: Vec<HashMap<String, String>>,
-    /// The logger's summary over all sine states ([`super::Summary::line`]).
+    /// The logger's summary over all sine states ([`super::Summary::line`]); empty without
+    /// subscribers.
     pub summary: HashMap<String, String>,
+    /// The summary line of each other subscriber process (`subscribers` − 1 of them).
+    pub other_subscribers: Vec<HashMap<String, String>>,
     /// The probe's line ([`super::ProbeReport::line`]), with [`StressConfig::probe`].
     pub probe: Option<HashMap<String, String>>,
     /// With [`RunOptions::trace`]: `(seconds since the window opened, sin(t_L) − value)` of the
@@ -139,13 +145,22 @@ impl RunResult {
         halves(&self.misses_by_second)
     }
 
-    /// Ticks per second over the window.
+    /// Ticks per second of one executor over the window (the executors' mean).
     pub fn achieved_hz(&self) -> f64 {
         if self.window_ns == 0 {
             0.0
         } else {
-            self.ticks as f64 * 1e9 / self.window_ns as f64
+            self.ticks as f64 * 1e9 / self.window_ns as f64 / self.config.executors.max(1) as f64
         }
+    }
+
+    /// Executor CPU per tick of the host (µs): the executors' CPU time over the window ÷ the
+    /// ticks each executed (their mean), i.e. what one tick of every executor costs together.
+    pub fn cpu_us_per_tick(&self) -> Option<f64> {
+        let per_executor = self.ticks as f64 / self.config.executors.max(1) as f64;
+        let cpu = self.cpu_percent?;
+        let hz = self.achieved_hz();
+        (per_executor > 0.0 && hz > 0.0).then(|| cpu / 100.0 * 1e6 / hz)
     }
 
     /// The executor's line: `executor: ticks=.. misses=.. lateness_p50_us=..`.
@@ -293,6 +308,14 @@ pub fn run(cfg: &StressConfig, opts: &RunOptions) -> Result<RunResult, RunError>
             opts.seconds, cfg.rate_hz, cfg.states
         )));
     }
+    if !(1..=16).contains(&cfg.executors) || cfg.subscribers > qos::STATE_SUBSCRIBERS {
+        return Err(RunError::Invalid(format!(
+            "a stress run takes 1–16 executors and at most {} subscribers per state (got {} and {})",
+            qos::STATE_SUBSCRIBERS,
+            cfg.executors,
+            cfg.subscribers
+        )));
+    }
     let temporary = opts.manifest_out.is_none();
     let path = opts.manifest_out.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!(
@@ -318,45 +341,91 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
             ..opts.launch.clone()
         },
     )?;
-    let pid = launch.pid(SUBSYSTEM);
+    let subs = subsystems(cfg);
+    let pids: Vec<Option<u32>> = subs.iter().map(|s| launch.pid(s)).collect();
     let bus = Bus::open(&domain, "stress-report")?;
-    let mut stats_sub = StatsSubscriber::new(&bus, SUBSYSTEM)?;
+    let mut stats_subs = subs
+        .iter()
+        .map(|s| StatsSubscriber::new(&bus, s))
+        .collect::<Result<Vec<_>, _>>()?;
 
     let secs = opts.seconds.to_string();
     let settle_ms = opts.settle.as_millis().to_string();
+    let buffer = cfg.history.max(1).to_string();
     let trace_path = std::env::temp_dir().join(format!(
         "conductor-stress-trace-{}-{}.txt",
         std::process::id(),
         monotonic_ns()
     ));
-    let mut log_args: Vec<OsString> = ["log", "--domain", domain.name(), "--sine", "--summary"]
-        .iter()
-        .map(Into::into)
+    let states = sine_states(cfg).join(",");
+    // Each reader creates its ready file once subscribed; the window opens for all of them at
+    // the time written to the go file once every one is ready.
+    let files = |what: &str| {
+        std::env::temp_dir().join(format!(
+            "conductor-stress-{}-{}-{what}",
+            std::process::id(),
+            monotonic_ns()
+        ))
+    };
+    let go = files("go");
+    let ready: Vec<PathBuf> = (0..cfg.subscribers)
+        .map(|i| files(&format!("ready{i}")))
         .collect();
-    log_args.extend(
-        [
-            "--states",
-            &sine_states(cfg).join(","),
-            "--seconds",
-            &secs,
-            "--settle-ms",
-            &settle_ms,
-        ]
-        .iter()
-        .map(Into::into),
-    );
+    // Every reader of the states: the logger (the sine checks, the trace) and the other
+    // subscribers, which read every sample the same way and report what they lost.
+    let reader_args = |logger: bool, ready: &Path| -> Vec<OsString> {
+        let mut a: Vec<OsString> = ["log", "--domain", domain.name(), "--summary"]
+            .iter()
+            .map(Into::into)
+            .collect();
+        a.extend([
+            "--ready".into(),
+            ready.into(),
+            "--go".into(),
+            go.clone().into(),
+        ]);
+        if logger {
+            a.push("--sine".into());
+        }
+        a.extend(
+            [
+                "--states",
+                &states,
+                "--seconds",
+                &secs,
+                "--settle-ms",
+                &settle_ms,
+                "--buffer",
+                &buffer,
+            ]
+            .iter()
+            .map(Into::into),
+        );
+        a
+    };
+    let mut log_args = reader_args(true, ready.first().map_or(Path::new(""), |p| p));
     if opts.trace {
         log_args.push("--trace".into());
         log_args.push(trace_path.clone().into());
     }
-    // The helpers stay off the executor's CPU, as the rest of a robot computer would with that
-    // CPU isolated: what is measured is the executor, not its neighbours on the same core.
+    // The helpers stay off the executors' CPU, as the rest of a robot computer would with that
+    // CPU isolated: what is measured is the executors, not their neighbours on the same core.
     let avoid: Vec<OsString> = cfg
         .cpu
         .map(|c| vec!["--avoid-cpu".into(), c.to_string().into()])
         .unwrap_or_default();
     log_args.extend(avoid.iter().cloned());
-    let logger = spawn(&opts.tool, &log_args, "logger")?;
+    let mut logger = if cfg.subscribers > 0 {
+        Some(spawn(&opts.tool, &log_args, "logger")?)
+    } else {
+        None
+    };
+    let mut readers = Vec::with_capacity(cfg.subscribers.saturating_sub(1));
+    for r in ready.iter().skip(1) {
+        let mut args = reader_args(false, r);
+        args.extend(avoid.iter().cloned());
+        readers.push(spawn(&opts.tool, &args, "subscriber")?);
+    }
     let probe = if cfg.probe {
         let interval = opts.probe_interval.unwrap_or_else(|| {
             Duration::from_millis(10).max(Duration::from_secs_f64(4.0 / cfg.rate_hz))
@@ -383,17 +452,40 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
         None
     };
 
-    // The executor's window: from the stats message after the helpers' settle time to the one
-    // `seconds` later (stats come every 100 ms).
+    // Every reader subscribed (a reader that exits early fails the run when it is collected
+    // below), then one window start for all of them, `settle` ahead.
+    let give_up = Instant::now() + Duration::from_secs(120);
+    let exited = |c: &mut Child| matches!(c.try_wait(), Ok(Some(_)));
+    while !ready.iter().all(|p| p.exists()) && Instant::now() < give_up {
+        if logger.as_mut().is_some_and(exited) || readers.iter_mut().any(exited) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let t0 = monotonic_ns() + opts.settle.as_nanos() as u64;
+    let go_tmp = files("go-tmp");
+    std::fs::write(&go_tmp, t0.to_string())
+        .and_then(|()| std::fs::rename(&go_tmp, &go))
+        .map_err(io(format!("writing {}", go.display())))?;
+    // The executors' window: from the stats message after the readers' window opened to the
+    // one `seconds` later (stats come every 100 ms), for each executor.
     std::thread::sleep(opts.settle);
-    let a = stats(&mut stats_sub, 0, Duration::from_secs(2))?;
-    let cpu_a = pid.and_then(|p| process_cpu_ns(p).ok());
+    let a = stats_subs
+        .iter_mut()
+        .map(|s| stats(s, 0, Duration::from_secs(2)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let cpu = |pids: &[Option<u32>]| -> Option<u64> {
+        pids.iter()
+            .map(|p| p.and_then(|p| process_cpu_ns(p).ok()))
+            .sum()
+    };
+    let cpu_a = cpu(&pids);
     let wall_a = monotonic_ns();
     // Stats once a second through the window, so misses can be seen over time: a schedule that
     // drifts or a queue that fills shows as misses growing from slice to slice.
     let window = Duration::from_secs_f64(opts.seconds);
     let opened = Instant::now();
-    let mut b = a;
+    let mut b = a.clone();
     let mut misses_by_second = Vec::with_capacity(opts.seconds.ceil() as usize + 1);
     loop {
         let left = window.saturating_sub(opened.elapsed());
@@ -401,28 +493,43 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
             break;
         }
         std::thread::sleep(left.min(Duration::from_secs(1)));
-        let s = stats(&mut stats_sub, b.seq, Duration::from_secs(2))?;
-        misses_by_second.push(s.misses - b.misses);
-        b = s;
+        let mut slice = 0;
+        for (sub, last) in stats_subs.iter_mut().zip(b.iter_mut()) {
+            let s = stats(sub, last.seq, Duration::from_secs(2))?;
+            slice += s.misses - last.misses;
+            *last = s;
+        }
+        misses_by_second.push(slice);
     }
-    let cpu_b = pid.and_then(|p| process_cpu_ns(p).ok());
+    let cpu_b = cpu(&pids);
     let wall_b = monotonic_ns();
 
-    let log_lines = finish(logger, "logger");
+    let log_lines = logger.map(|l| finish(l, "logger")).transpose();
+    let reader_lines: Vec<_> = readers
+        .into_iter()
+        .map(|r| finish(r, "subscriber"))
+        .collect();
     let probe_lines = probe.map(|p| finish(p, "probe")).transpose();
-    drop(stats_sub);
+    for p in ready.iter().chain([&go]) {
+        let _ = std::fs::remove_file(p);
+    }
+    drop(stats_subs);
     drop(bus);
     launch.stop();
     let ended = launch.wait();
-    let trace = if opts.trace {
+    let trace = if opts.trace && cfg.subscribers > 0 {
         let t = read_trace(&trace_path);
         let _ = std::fs::remove_file(&trace_path);
         t?
     } else {
         Vec::new()
     };
-    let log_lines = log_lines?;
+    let log_lines = log_lines?.unwrap_or_default();
     let probe_lines = probe_lines?;
+    let mut other_subscribers = Vec::with_capacity(reader_lines.len());
+    for lines in reader_lines {
+        other_subscribers.push(summary_of(&lines?));
+    }
     ended?;
 
     let parsed: Vec<HashMap<String, String>> = log_lines.iter().map(|l| parse_line(l)).collect();
@@ -431,38 +538,51 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
         .filter(|kv| kv.contains_key("state"))
         .cloned()
         .collect();
-    let summary = parsed
-        .iter()
-        .find(|kv| kv.contains_key("summary"))
-        .cloned()
-        .unwrap_or_default();
+    let summary = summary_of(&log_lines);
     let probe = probe_lines.and_then(|lines| {
         lines
             .iter()
             .map(|l| parse_line(l))
             .find(|kv| kv.contains_key("probe"))
     });
-    let cpu_percent = match (cpu_a, cpu_b) {
+    let (cpu_ns, cpu_percent) = match (cpu_a, cpu_b) {
         (Some(x), Some(y)) if wall_b > wall_a => {
-            Some(y.saturating_sub(x) as f64 * 100.0 / (wall_b - wall_a) as f64)
+            let ns = y.saturating_sub(x);
+            (Some(ns), Some(ns as f64 * 100.0 / (wall_b - wall_a) as f64))
         }
-        _ => None,
+        _ => (None, None),
     };
+    let mut lateness = Histogram::new();
+    for (a, b) in a.iter().zip(&b) {
+        lateness.merge(&window_lateness(a, b));
+    }
+    let (first_a, first_b) = (&a[0], &b[0]);
     Ok(RunResult {
         config: *cfg,
-        rt_active: b.rt_active != 0,
-        pinned_cpu: usize::try_from(b.cpu).ok(),
-        ticks: b.ticks - a.ticks,
-        misses: b.misses - a.misses,
+        rt_active: b.iter().all(|s| s.rt_active != 0),
+        pinned_cpu: usize::try_from(first_b.cpu).ok(),
+        ticks: a.iter().zip(&b).map(|(a, b)| b.ticks - a.ticks).sum(),
+        misses: a.iter().zip(&b).map(|(a, b)| b.misses - a.misses).sum(),
         misses_by_second,
-        lateness: window_lateness(&a, &b),
-        window_ns: b.t_ns.saturating_sub(a.t_ns),
+        lateness,
+        window_ns: first_b.t_ns.saturating_sub(first_a.t_ns),
         cpu_percent,
+        cpu_ns,
         states,
         summary,
+        other_subscribers,
         probe,
         trace,
     })
+}
+
+/// The `summary=all` line among a reader's output lines, parsed (empty when it has none).
+fn summary_of(lines: &[String]) -> HashMap<String, String> {
+    lines
+        .iter()
+        .map(|l| parse_line(l))
+        .find(|kv| kv.contains_key("summary"))
+        .unwrap_or_default()
 }
 
 /// Reads a trace written by `log --trace`: lines of `<t_L ns> <error>`; times are returned in

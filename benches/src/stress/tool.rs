@@ -17,6 +17,7 @@ use clap::{Parser, Subcommand};
 use conductor_bus::{monotonic_ns, Bus, Domain};
 
 use super::{run, CommandProbe, Logger, RunOptions, StressConfig};
+use crate::suite::{scaling, Helpers};
 use conductor_executor::launcher::LaunchOptions;
 
 /// `conductor-stress`.
@@ -65,6 +66,26 @@ pub enum Cmd {
         #[arg(long)]
         manifest_out: Option<PathBuf>,
     },
+    /// The scaling curves of `conductor bench --scaling` (the same library function, this
+    /// program as every helper): CPU per tick and sample → controller latency against states,
+    /// subscribers per state and executors per host, with the fitted per-unit costs.
+    Scaling {
+        /// Fewer points, 1 s each.
+        #[arg(long)]
+        quick: bool,
+        /// Output directory (report.md, report.json, *.png).
+        #[arg(short, long, default_value = "bench-out")]
+        out: PathBuf,
+        /// States of the states sweep [default: 1,10,41,200,1000; --quick: 1,10,41].
+        #[arg(long, value_delimiter = ',')]
+        states: Vec<usize>,
+        /// Logged seconds per point [default: 5; --quick: 1].
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// CPU of the executors [default: the last one].
+        #[arg(long)]
+        cpu: Option<usize>,
+    },
     /// Subscribe to states and report what arrived (one `key=value` line per state).
     Log {
         /// Bus domain.
@@ -85,6 +106,16 @@ pub enum Cmd {
         /// Also print a `summary=all` line over every state.
         #[arg(long)]
         summary: bool,
+        /// Each subscriber's buffer (samples; at most the states' history).
+        #[arg(long, default_value_t = 4096)]
+        buffer: usize,
+        /// Create this file once subscribed, then read every sample while waiting for `--go`.
+        #[arg(long, requires = "go")]
+        ready: Option<PathBuf>,
+        /// Open the window at the CLOCK_MONOTONIC time (ns) this file holds, once it exists
+        /// (instead of `--settle-ms` after subscribing): every reader of a run shares one window.
+        #[arg(long, requires = "ready")]
+        go: Option<PathBuf>,
         /// Write the first state's `<t_L ns> <sin(t_L) − value>` per sample here (with --sine).
         #[arg(long)]
         trace: Option<PathBuf>,
@@ -144,12 +175,26 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
             settle_ms,
             sine,
             summary,
+            buffer,
+            ready,
+            go,
             trace,
             avoid_cpu,
         } => (
             "log",
-            keep_off(avoid_cpu)
-                .and_then(|()| log(&domain, &states, seconds, settle_ms, sine, summary, trace)),
+            keep_off(avoid_cpu).and_then(|()| {
+                log(
+                    &domain,
+                    &states,
+                    Window {
+                        seconds,
+                        settle_ms,
+                        handshake: ready.zip(go),
+                    },
+                    (sine, summary, buffer),
+                    trace,
+                )
+            }),
         ),
         Cmd::Probe {
             domain,
@@ -163,6 +208,40 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
             keep_off(avoid_cpu)
                 .and_then(|()| probe(&domain, &state, seconds, settle_ms, interval_us)),
         ),
+        Cmd::Scaling {
+            quick,
+            out,
+            states,
+            seconds,
+            cpu,
+        } => {
+            let helpers = Helpers {
+                launch: LaunchOptions {
+                    quiet: true,
+                    handle_signals: false,
+                    ..ctx.launch
+                },
+                stress_tool: ctx.tool,
+                pingpong_child: Vec::new(),
+            };
+            let mut cfg = crate::suite::Config::new(quick, helpers);
+            let mut plan = scaling::Plan::new(quick);
+            if !states.is_empty() {
+                plan.states = states;
+            }
+            cfg.seconds = seconds.unwrap_or(if quick {
+                scaling::QUICK_SECONDS
+            } else {
+                scaling::FULL_SECONDS
+            });
+            if let Some(c) = cpu {
+                cfg.cpu = c;
+            }
+            cfg.out = out;
+            cfg.command = std::env::args().collect::<Vec<_>>().join(" ");
+            let r = scaling::run(&cfg, &plan).map(|r| println!("{}", r.markdown()));
+            ("scaling", r.map_err(|e| e.to_string()))
+        }
         Cmd::Run {
             rate,
             seconds,
@@ -181,6 +260,7 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
                 spin_us,
                 states,
                 probe,
+                ..StressConfig::default()
             };
             let mut opts = RunOptions::new(seconds);
             opts.tool = ctx.tool;
@@ -211,13 +291,56 @@ fn keep_off(cpu: Option<usize>) -> Result<(), String> {
     }
 }
 
+/// A logger's window: it opens `settle_ms` after subscribing, or with `handshake` (ready file,
+/// go file) at the time the go file gives, and lasts `seconds`.
+struct Window {
+    seconds: f64,
+    settle_ms: u64,
+    handshake: Option<(PathBuf, PathBuf)>,
+}
+
+/// How long a reader waits for its go file before giving up.
+const GO_TIMEOUT: Duration = Duration::from_secs(120);
+
+/// Says the logger is subscribed (`ready`), reads every sample while the other readers come up,
+/// and returns the window start the run wrote into `go`.
+fn handshake(
+    logger: &mut Logger,
+    ready: &std::path::Path,
+    go: &std::path::Path,
+) -> Result<u64, String> {
+    std::fs::write(ready, b"").map_err(|e| format!("writing {}: {e}", ready.display()))?;
+    let give_up = Instant::now() + GO_TIMEOUT;
+    loop {
+        if let Some(t0) = std::fs::read_to_string(go)
+            .ok()
+            .and_then(|t| t.trim().parse::<u64>().ok())
+        {
+            return Ok(t0);
+        }
+        if Instant::now() > give_up {
+            return Err(format!(
+                "no window start in {} after {GO_TIMEOUT:?}",
+                go.display()
+            ));
+        }
+        logger.poll().map_err(|e| e.to_string())?;
+        logger
+            .wait(Duration::from_millis(5))
+            .map_err(|e| e.to_string())?;
+    }
+}
+
+/// `(sine, summary, buffer)`: the sin(t) checks, a summary line, each subscriber's buffer.
 fn log(
     domain: &str,
     states: &[String],
-    seconds: f64,
-    settle_ms: u64,
-    sine: bool,
-    summary: bool,
+    Window {
+        seconds,
+        settle_ms,
+        handshake: files,
+    }: Window,
+    (sine, summary, buffer): (bool, bool, usize),
     trace: Option<PathBuf>,
 ) -> Result<(), String> {
     let domain = Domain::new(domain).map_err(|e| e.to_string())?;
@@ -225,7 +348,7 @@ fn log(
     // The states may still be coming up: retry for a while.
     let give_up = Instant::now() + Duration::from_secs(10);
     let mut logger = loop {
-        match Logger::new(&bus, states, sine) {
+        match Logger::new(&bus, states, sine, buffer) {
             Ok(l) => break l,
             Err(e) if Instant::now() > give_up => return Err(e.to_string()),
             Err(_) => std::thread::sleep(Duration::from_millis(20)),
@@ -236,7 +359,10 @@ fn log(
         // One point per sample of the window, plus room for a late tail.
         logger.keep_trace(((rate * (seconds + 1.0)) as usize).min(20_000_000));
     }
-    let t0 = monotonic_ns() + settle_ms * 1_000_000;
+    let t0 = match &files {
+        Some((ready, go)) => handshake(&mut logger, ready, go)?,
+        None => monotonic_ns() + settle_ms * 1_000_000,
+    };
     let t1 = t0 + (seconds * 1e9) as u64;
     logger.set_window(t0, t1);
     // Samples of the window's last instants arrive a little after it closes.

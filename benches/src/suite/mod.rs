@@ -14,11 +14,16 @@
 //!
 //! The executor sleeps to each deadline (no spin) in every run, so a suite never leaves a
 //! SCHED_FIFO thread spinning.
+//!
+//! [`scaling`] is `conductor bench --scaling`: the same stress test swept over states,
+//! subscribers per state and executors per host, with fitted per-unit costs.
 
 pub mod cyclictest;
+pub mod fit;
 pub mod machine;
 pub mod plots;
 pub mod report;
+pub mod scaling;
 
 use std::ffi::OsString;
 use std::io::IsTerminal as _;
@@ -377,7 +382,8 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
 
     machine.load_end = load_average();
     let report = Report {
-        schema: 1,
+        schema: report::SCHEMA,
+        mode: "suite".into(),
         date,
         command: cfg.command.clone(),
         machine,
@@ -445,6 +451,7 @@ fn stress_run(cfg: &Config, rate_hz: f64, states: usize) -> Result<RunResult, Su
         spin_us: 0.0,
         states,
         probe: true,
+        ..StressConfig::default()
     };
     let mut opts = RunOptions::new(cfg.seconds);
     opts.tool = cfg.helpers.stress_tool.clone();

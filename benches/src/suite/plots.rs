@@ -1,11 +1,14 @@
 //! PNG plots of a suite run (plotters, the DejaVu font embedded so no system font is needed):
-//! lateness histograms beside cyclictest's, and the thesis error against time (Fig. 3.1).
+//! lateness histograms beside cyclictest's, the thesis error against time (Fig. 3.1), and the
+//! scaling curves (measured points with their least-squares line).
 
 use std::path::Path;
 
 use conductor_bus::histogram::bucket_range;
 use conductor_bus::Histogram;
 use plotters::prelude::*;
+
+use super::fit::LineFit;
 
 /// Image width (px).
 pub const WIDTH: u32 = 1200;
@@ -245,6 +248,106 @@ fn draw_error(path: &Path, title: &str, curves: &[Curve<'_>]) -> DrawResult {
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2)));
     }
     draw_legend(&mut chart)?;
+    root.present()?;
+    Ok(())
+}
+
+/// One measured series of a scaling curve: `(x, y)` points, drawn as markers joined by a line.
+#[derive(Debug, Clone, Copy)]
+pub struct Series<'a> {
+    /// Legend label.
+    pub label: &'a str,
+    /// The points.
+    pub points: &'a [(f64, f64)],
+}
+
+/// A scaling curve: `series` against `x`, with the fitted line `fit` (dashed, over the series'
+/// x range) labelled `fit_label`; linear axes from 0.
+pub fn curve_png(
+    path: &Path,
+    title: &str,
+    (x_desc, y_desc): (&str, &str),
+    series: &[Series<'_>],
+    fit: Option<(&str, LineFit)>,
+) -> Result<(), PlotError> {
+    plot(path, || {
+        draw_curve(path, title, (x_desc, y_desc), series, fit)
+    })
+}
+
+fn draw_curve(
+    path: &Path,
+    title: &str,
+    (x_desc, y_desc): (&str, &str),
+    series: &[Series<'_>],
+    fit: Option<(&str, LineFit)>,
+) -> DrawResult {
+    let all = || {
+        series
+            .iter()
+            .flat_map(|s| s.points.iter().copied())
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+    };
+    let x_max = all().map(|p| p.0).fold(1.0f64, f64::max) * 1.05;
+    let fit_y = |x: f64| fit.map_or(0.0, |(_, f)| f.at(x));
+    let y_max = all()
+        .map(|p| p.1)
+        .chain([fit_y(0.0), fit_y(x_max)])
+        .fold(1e-3f64, f64::max)
+        * 1.15;
+    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 26))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(0f64..x_max, 0f64..y_max)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 17))
+        .draw()?;
+    for (i, s) in series.iter().enumerate() {
+        let c = PALETTE[i % PALETTE.len()];
+        let pts: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .copied()
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))?
+            .label(s.label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart.draw_series(pts.iter().map(|&xy| Circle::new(xy, 5, c.filled())))?;
+    }
+    if let Some((label, f)) = fit {
+        let (x0, x1) = all().fold((f64::MAX, f64::MIN), |(a, b), p| (a.min(p.0), b.max(p.0)));
+        if x0 <= x1 {
+            let c = BLACK.mix(0.6);
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(x0, f.at(x0)), (x1, f.at(x1))],
+                    8,
+                    6,
+                    c.stroke_width(2),
+                ))?
+                .label(label)
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                });
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .draw()?;
     root.present()?;
     Ok(())
 }

@@ -11,6 +11,10 @@ use super::machine::Machine;
 use crate::percentiles::fmt_ns;
 use crate::Percentiles;
 
+/// The layout version of `report.json`: 2 added `mode` (`suite` or `scaling`, whose report is
+/// [`super::scaling::ScalingReport`]).
+pub const SCHEMA: u32 = 2;
+
 /// Nearest-rank percentiles of a latency (ns).
 #[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
 pub struct Quantiles {
@@ -191,8 +195,10 @@ pub struct StressRow {
 /// Everything one suite run measured.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Report {
-    /// Layout version of this JSON.
+    /// Layout version of this JSON ([`SCHEMA`]).
     pub schema: u32,
+    /// `suite` (this report) or `scaling` ([`super::scaling::ScalingReport`]).
+    pub mode: String,
     /// When the run started.
     pub date: String,
     /// The command line.

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use conductor_benches::pingpong;
 use conductor_benches::stress::tool::{self, ToolContext};
-use conductor_benches::suite::{self, CyclicChoice, Helpers};
+use conductor_benches::suite::{self, scaling, CyclicChoice, Helpers};
 use conductor_executor::launcher::LaunchOptions;
 
 use crate::cli::BenchArgs;
@@ -29,15 +29,54 @@ fn executor_launch(me: &OsString) -> LaunchOptions {
     }
 }
 
-/// Runs the suite; prints the Markdown report and where the files are.
-pub fn run(a: &BenchArgs) -> Result<()> {
+/// This binary as every helper process.
+fn helpers() -> Result<Helpers> {
     let me = me()?;
-    let helpers = Helpers {
+    Ok(Helpers {
         launch: executor_launch(&me),
         stress_tool: vec![me.clone(), "__stress".into()],
         pingpong_child: vec![me, "__pingpong".into()],
-    };
-    let mut cfg = suite::Config::new(a.quick, helpers);
+    })
+}
+
+/// `conductor bench --scaling`: the scaling curves; prints the Markdown report and where the
+/// files are. `--states`, `--seconds`, `--cpu`, `--priority` and `--rates` (its first rate)
+/// change the plan.
+pub fn run_scaling(a: &BenchArgs) -> Result<()> {
+    let mut cfg = suite::Config::new(a.quick, helpers()?);
+    let mut plan = scaling::Plan::new(a.quick);
+    if let Some(&r) = a.rates.first() {
+        plan.rate_hz = r;
+    }
+    if !a.states.is_empty() {
+        plan.states = a.states.clone();
+    }
+    cfg.seconds = a.seconds.unwrap_or(if a.quick {
+        scaling::QUICK_SECONDS
+    } else {
+        scaling::FULL_SECONDS
+    });
+    if let Some(c) = a.cpu {
+        cfg.cpu = c;
+    }
+    cfg.priority = a.priority;
+    cfg.out = a.out.clone();
+    cfg.progress = !a.no_progress;
+    cfg.command = std::env::args().collect::<Vec<_>>().join(" ");
+    let report =
+        scaling::run(&cfg, &plan).map_err(|e| CliError::Usage(format!("bench --scaling: {e}")))?;
+    println!("{}", report.markdown());
+    eprintln!(
+        "bench: wrote {0}/report.md, {0}/report.json and {1} plots",
+        cfg.out.display(),
+        report.plots.len()
+    );
+    Ok(())
+}
+
+/// Runs the suite; prints the Markdown report and where the files are.
+pub fn run(a: &BenchArgs) -> Result<()> {
+    let mut cfg = suite::Config::new(a.quick, helpers()?);
     if !a.rates.is_empty() {
         cfg.rates_hz = a.rates.clone();
     }

@@ -18,6 +18,7 @@ Examples:
   conductor udp-gateway --base-port 2827          plain-text SET/GET/SMP per state (thesis §2.5.2)
   conductor plot run.mcap 'leg/*' -o leg.png      joint plot of recorded states
   conductor bench --quick                         stress test beside cyclictest, ~1 minute
+  conductor bench --scaling                       CPU and latency against states, subscribers, executors
   conductor bridge --export 'leg/*' --listen tcp/0.0.0.0:7447   states to other hosts over Zenoh
   conductor completions bash > /etc/bash_completion.d/conductor
 
@@ -168,7 +169,7 @@ thesis' error sin(t) - value (Fig. 3.1 plots); plus the raw iceoryx2 ping-pong f
 rt-tests (cyclictest) with apt-get when it is missing, unless --no-install. A full run takes
 about 5 minutes; --quick about one. Run it on a quiet machine.
 
-Examples:\n  conductor bench\n  conductor bench --quick -o /tmp/bench\n  conductor bench --rates 1000,2000,5000 --states 3 --seconds 5"
+Examples:\n  conductor bench\n  conductor bench --quick -o /tmp/bench\n  conductor bench --rates 1000,2000,5000 --states 3 --seconds 5\n  conductor bench --scaling -o /tmp/scaling"
     )]
     Bench(BenchArgs),
     /// Fault campaign on the simulated robots of deploy/ (byte faults, unplugs, executor and
@@ -497,6 +498,11 @@ pub struct BenchArgs {
     /// Never draw a progress bar (it is drawn only when stderr is a terminal anyway).
     #[arg(long)]
     pub no_progress: bool,
+    /// Only the scaling curves: executor CPU per tick and sample → controller latency against
+    /// states (1–1000), subscribers per state (0–16) and executors per host (1–4) at 1 kHz,
+    /// with fitted per-unit costs (--quick: fewer points, 1 s each).
+    #[arg(long, conflicts_with = "bridge")]
+    pub scaling: bool,
     /// Only the bridge benchmark: latency through `conductor bridge` vs raw Zenoh vs the local
     /// bus, and a load run (CPU % of each bridge, drops); over two network namespaces as root.
     #[arg(long)]

@@ -82,6 +82,7 @@ pub fn run(cli: Cli) -> Result<()> {
                 .into(),
         )),
         Command::Bench(a) if a.bridge => bench::run_bridge(a),
+        Command::Bench(a) if a.scaling => bench::run_scaling(a),
         Command::Bench(a) => bench::run(a),
         Command::BridgeBench { args } => bench_bridge::helper(args),
         Command::List(a) => list::run(&bus("list")?, a).map(drop),

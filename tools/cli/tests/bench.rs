@@ -76,7 +76,10 @@ fn quick_bench_writes_a_table_json_and_plots() {
     // JSON: parses, and holds a row for every configured rate × state count.
     let text = std::fs::read_to_string(out.join("report.json")).unwrap();
     let j: Value = serde_json::from_str(&text).unwrap();
-    assert_eq!(j["schema"], 1);
+    assert_eq!(
+        (j["schema"].as_u64(), j["mode"].as_str()),
+        (Some(2), Some("suite"))
+    );
     assert_eq!(j["quick"], true);
     let rates: Vec<f64> = j["rates_hz"]
         .as_array()
