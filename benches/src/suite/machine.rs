@@ -38,6 +38,24 @@ pub fn load_average() -> f64 {
 }
 
 impl Machine {
+    /// One line for a report: kernel, CPUs, PREEMPT_RT or not, and the load average at the
+    /// start and the end of the run (no final period).
+    pub fn summary(&self) -> String {
+        format!(
+            "Linux {} ({}), {} CPUs, {}; load average {:.2} at the start, {:.2} at the end",
+            self.kernel,
+            self.kernel_version,
+            self.cpus,
+            if self.preempt_rt {
+                "PREEMPT_RT"
+            } else {
+                "not PREEMPT_RT"
+            },
+            self.load_start,
+            self.load_end
+        )
+    }
+
     /// Reads the facts now (`load_end` is set by the caller at the end).
     pub fn now() -> Self {
         let version = read("/proc/sys/kernel/version");

@@ -445,14 +445,33 @@ fn measure_ipc(cfg: &Config, progress: &mut Progress) -> Result<Vec<IpcRow>, Sui
 
 fn stress_run(cfg: &Config, rate_hz: f64, states: usize) -> Result<RunResult, SuiteError> {
     let sc = StressConfig {
+        probe: true,
+        ..stress_config(cfg, rate_hz, states)
+    };
+    run_stress(cfg, &sc, true, None)
+}
+
+/// A stress run of `states` at `rate_hz` on the suite's CPU and priority, sleeping to its
+/// deadlines (no spin).
+pub(crate) fn stress_config(cfg: &Config, rate_hz: f64, states: usize) -> StressConfig {
+    StressConfig {
         rate_hz,
         cpu: Some(cfg.cpu),
         priority: cfg.priority,
         spin_us: 0.0,
         states,
-        probe: true,
         ..StressConfig::default()
-    };
+    }
+}
+
+/// Runs `sc` for the suite's time with its helpers, quietly; `trace` keeps the per-sample
+/// trace, `ready` bounds the bring-up (default: the launcher's).
+pub(crate) fn run_stress(
+    cfg: &Config,
+    sc: &StressConfig,
+    trace: bool,
+    ready: Option<Duration>,
+) -> Result<RunResult, SuiteError> {
     let mut opts = RunOptions::new(cfg.seconds);
     opts.tool = cfg.helpers.stress_tool.clone();
     opts.launch = LaunchOptions {
@@ -460,15 +479,18 @@ fn stress_run(cfg: &Config, rate_hz: f64, states: usize) -> Result<RunResult, Su
         handle_signals: false,
         ..cfg.helpers.launch.clone()
     };
-    opts.trace = true;
-    stress::run(&sc, &opts).map_err(|source| SuiteError::Stress {
-        rate_hz,
-        states,
+    if let Some(r) = ready {
+        opts.launch.ready_timeout = r;
+    }
+    opts.trace = trace;
+    stress::run(sc, &opts).map_err(|source| SuiteError::Stress {
+        rate_hz: sc.rate_hz,
+        states: sc.states,
         source,
     })
 }
 
-fn num<T: std::str::FromStr + Default>(
+pub(crate) fn num<T: std::str::FromStr + Default>(
     kv: &std::collections::HashMap<String, String>,
     k: &str,
 ) -> T {

@@ -123,6 +123,30 @@ impl Distribution {
 
 type DrawResult = Result<(), Box<dyn std::error::Error>>;
 
+/// A white canvas of the plots' size at `path`.
+fn canvas(
+    path: &Path,
+) -> Result<DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>, Box<dyn std::error::Error>> {
+    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
+    root.fill(&WHITE)?;
+    Ok(root)
+}
+
+/// A chart on `root` with `title` and the margins every plot here has (`y_labels` px for the
+/// y axis' labels).
+fn titled<'a, 'b>(
+    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    title: &str,
+    y_labels: u32,
+) -> ChartBuilder<'a, 'b, BitMapBackend<'b>> {
+    let mut b = ChartBuilder::on(root);
+    b.caption(title, ("sans-serif", 26))
+        .margin(20)
+        .x_label_area_size(50)
+        .y_label_area_size(y_labels);
+    b
+}
+
 /// The legend box of every plot: upper right, on a light background.
 fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
@@ -168,13 +192,8 @@ fn draw_lateness(path: &Path, title: &str, series: &[Distribution]) -> DrawResul
         .fold(1.0f64, f64::min)
         .max(1e-9)
         / 2.0;
-    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 26))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
+    let root = canvas(path)?;
+    let mut chart = titled(&root, title, 80)
         .build_cartesian_2d((0.5f64..x_max).log_scale(), (y_min..1.5f64).log_scale())?;
     chart
         .configure_mesh()
@@ -221,14 +240,8 @@ fn draw_error(path: &Path, title: &str, curves: &[Curve<'_>]) -> DrawResult {
         .filter(|v| v.is_finite())
         .fold(1e-9f64, f64::max)
         * 1.1;
-    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 26))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(90)
-        .build_cartesian_2d(0f64..t_max, -y_abs..y_abs)?;
+    let root = canvas(path)?;
+    let mut chart = titled(&root, title, 90).build_cartesian_2d(0f64..t_max, -y_abs..y_abs)?;
     chart
         .configure_mesh()
         .x_desc("Time (s)")
@@ -295,14 +308,8 @@ fn draw_curve(
         .chain([fit_y(0.0), fit_y(x_max)])
         .fold(1e-3f64, f64::max)
         * 1.15;
-    let root = BitMapBackend::new(path, (WIDTH, HEIGHT)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, ("sans-serif", 26))
-        .margin(20)
-        .x_label_area_size(50)
-        .y_label_area_size(80)
-        .build_cartesian_2d(0f64..x_max, 0f64..y_max)?;
+    let root = canvas(path)?;
+    let mut chart = titled(&root, title, 80).build_cartesian_2d(0f64..x_max, 0f64..y_max)?;
     chart
         .configure_mesh()
         .x_desc(x_desc)

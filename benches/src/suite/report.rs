@@ -266,18 +266,8 @@ impl Report {
         let _ = writeln!(s, "Command: `{}`\n", self.command);
         let _ = writeln!(
             s,
-            "Machine: Linux {} ({}), {} CPUs, {}; load average {:.2} at the start, {:.2} at the \
-             end. Kernel command line: `{}`.\n",
-            m.kernel,
-            m.kernel_version,
-            m.cpus,
-            if m.preempt_rt {
-                "PREEMPT_RT"
-            } else {
-                "not PREEMPT_RT"
-            },
-            m.load_start,
-            m.load_end,
+            "Machine: {}. Kernel command line: `{}`.\n",
+            m.summary(),
             m.cmdline
         );
         let _ = writeln!(
@@ -417,13 +407,18 @@ impl Report {
                 thesis_reading(r.rate_hz)
             );
         }
-        if !self.plots.is_empty() {
-            let _ = writeln!(s, "\n## Plots\n");
-            for p in &self.plots {
-                let _ = writeln!(s, "- [{p}]({p})");
-            }
-        }
+        plots_section(&mut s, &self.plots);
         s
+    }
+}
+
+/// The report's list of its images (nothing when there are none).
+pub(crate) fn plots_section(s: &mut String, plots: &[String]) {
+    if !plots.is_empty() {
+        let _ = writeln!(s, "\n## Plots\n");
+        for p in plots {
+            let _ = writeln!(s, "- [{p}]({p})");
+        }
     }
 }
 

@@ -22,11 +22,10 @@ use serde::Serialize;
 use super::fit::{fit_line, LineFit};
 use super::machine::{load_average, utc_now, Machine};
 use super::plots::{self, Series};
-use super::report::Quantiles;
-use super::{io, write, Config, Progress, SuiteError};
+use super::report::{plots_section, Quantiles};
+use super::{io, num, run_stress, stress_config, write, Config, Progress, SuiteError};
 use crate::percentiles::fmt_ns;
-use crate::stress::{self, RunOptions, RunResult, StressConfig};
-use conductor_executor::launcher::LaunchOptions;
+use crate::stress::{RunResult, StressConfig};
 
 /// States per subsystem of the subscriber and executor sweeps: a 41-DOF Hubo's worth.
 pub const BASE_STATES: usize = 41;
@@ -340,34 +339,15 @@ fn point_run(
     (states, subscribers, executors): (usize, usize, usize),
 ) -> Result<RunResult, SuiteError> {
     let sc = StressConfig {
-        rate_hz,
-        cpu: Some(cfg.cpu),
-        priority: cfg.priority,
-        spin_us: 0.0,
-        states,
         probe: false,
         executors,
         subscribers,
         history: HISTORY,
+        ..stress_config(cfg, rate_hz, states)
     };
-    let mut opts = RunOptions::new(cfg.seconds);
-    opts.tool = cfg.helpers.stress_tool.clone();
-    opts.launch = LaunchOptions {
-        quiet: true,
-        handle_signals: false,
-        // Bring-up opens a service per state: 1 000 states take longer than the default 10 s.
-        ready_timeout: Duration::from_secs(10) + Duration::from_millis(100) * states as u32,
-        ..cfg.helpers.launch.clone()
-    };
-    stress::run(&sc, &opts).map_err(|source| SuiteError::Stress {
-        rate_hz,
-        states,
-        source,
-    })
-}
-
-fn num(kv: &std::collections::HashMap<String, String>, k: &str) -> u64 {
-    kv.get(k).and_then(|v| v.parse().ok()).unwrap_or_default()
+    // Bring-up opens a service per state: 1 000 states take longer than the default 10 s.
+    let ready = Duration::from_secs(10) + Duration::from_millis(100) * states as u32;
+    run_stress(cfg, &sc, false, Some(ready))
 }
 
 /// A point's figures from its stress run.
@@ -384,12 +364,16 @@ pub fn point(r: &RunResult) -> ScalingPoint {
         lateness: Quantiles::from(&r.lateness),
         sample_to_controller: Quantiles::from_line(&r.summary, "e2e", "count"),
         samples: num(&r.summary, "count"),
-        lost: num(&r.summary, "missed")
+        lost: num::<u64>(&r.summary, "missed")
             + r.other_subscribers
                 .iter()
-                .map(|s| num(s, "missed"))
+                .map(|s| num::<u64>(s, "missed"))
                 .sum::<u64>(),
-        other_samples: r.other_subscribers.iter().map(|s| num(s, "count")).sum(),
+        other_samples: r
+            .other_subscribers
+            .iter()
+            .map(|s| num::<u64>(s, "count"))
+            .sum(),
     }
 }
 
@@ -441,6 +425,16 @@ pub fn sweep_points(
     (cpu, lat)
 }
 
+/// A fitted line's legend: `<what>: a µs + b µs × <unit>`.
+fn fit_label(what: &str, fit: Option<LineFit>, digits: usize, unit: &str) -> Option<String> {
+    fit.map(|f| {
+        format!(
+            "{what}: {:.digits$} µs + {:.3} µs × {unit}",
+            f.intercept, f.slope
+        )
+    })
+}
+
 /// `cpu-vs-<sweep>.png` and `latency-vs-<sweep>.png`.
 fn curves(out: &Path, s: &Sweep, points: &[ScalingPoint]) -> Result<Vec<String>, SuiteError> {
     let x = |p: &ScalingPoint| match s.name.as_str() {
@@ -455,14 +449,8 @@ fn curves(out: &Path, s: &Sweep, points: &[ScalingPoint]) -> Result<Vec<String>,
     };
     let (cpu, lat) = sweep_points(&s.points, points, &x);
     let cpu_name = format!("cpu-vs-{}.png", s.name);
-    let fit_label = s.cpu_fit.map(|f| {
-        format!(
-            "least squares: {:.2} µs + {:.3} µs × {}",
-            f.intercept,
-            f.slope,
-            s.name.trim_end_matches('s')
-        )
-    });
+    let unit = s.name.trim_end_matches('s');
+    let cpu_label = fit_label("least squares", s.cpu_fit, 2, unit);
     plots::curve_png(
         &out.join(&cpu_name),
         &format!("Executor CPU per tick against {}", s.name),
@@ -471,19 +459,12 @@ fn curves(out: &Path, s: &Sweep, points: &[ScalingPoint]) -> Result<Vec<String>,
             label: "measured (schedstat over the window ÷ ticks)",
             points: &cpu,
         }],
-        fit_label.as_deref().zip(s.cpu_fit),
+        cpu_label.as_deref().zip(s.cpu_fit),
     )?;
     let lat_name = format!("latency-vs-{}.png", s.name);
     let p50: Vec<(f64, f64)> = lat.iter().map(|p| (p.0, p.1)).collect();
     let p99: Vec<(f64, f64)> = lat.iter().map(|p| (p.0, p.2)).collect();
-    let lat_label = s.latency_p50_fit.map(|f| {
-        format!(
-            "p50 least squares: {:.1} µs + {:.3} µs × {}",
-            f.intercept,
-            f.slope,
-            s.name.trim_end_matches('s')
-        )
-    });
+    let lat_label = fit_label("p50 least squares", s.latency_p50_fit, 1, unit);
     plots::curve_png(
         &out.join(&lat_name),
         &format!("Sample → controller latency against {}", s.name),
@@ -515,21 +496,7 @@ impl ScalingReport {
         let m = &self.machine;
         let _ = writeln!(s, "# conductor bench --scaling — {}\n", self.date);
         let _ = writeln!(s, "Command: `{}`\n", self.command);
-        let _ = writeln!(
-            s,
-            "Machine: Linux {} ({}), {} CPUs, {}; load average {:.2} at the start, {:.2} at the \
-             end.\n",
-            m.kernel,
-            m.kernel_version,
-            m.cpus,
-            if m.preempt_rt {
-                "PREEMPT_RT"
-            } else {
-                "not PREEMPT_RT"
-            },
-            m.load_start,
-            m.load_end
-        );
+        let _ = writeln!(s, "Machine: {}.\n", m.summary());
         let _ = writeln!(
             s,
             "Every point: the stress test at {} Hz, {} s logged; {}; state history and reader \
@@ -605,12 +572,7 @@ impl ScalingReport {
                 sw.points.len()
             );
         }
-        if !self.plots.is_empty() {
-            let _ = writeln!(s, "\n## Plots\n");
-            for p in &self.plots {
-                let _ = writeln!(s, "- [{p}]({p})");
-            }
-        }
+        plots_section(&mut s, &self.plots);
         s
     }
 }

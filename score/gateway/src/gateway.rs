@@ -305,23 +305,26 @@ impl Gateway {
         if !vars.is_empty() {
             // The script comes back in several `Output` frames and nothing says how many: one
             // lost on the link would leave a script missing lines, which a restore would then
-            // replay. Kept only when two answers in a row agree.
-            let mut previous: Option<String> = None;
+            // replay. Kept only when two answers in a row agree, and never empty while the
+            // board has variables (two answers whose every frame was lost agree too, and an
+            // empty script would leave the next empty board unrestored for good).
+            let mut previous: Option<Vec<String>> = None;
             for _ in 0..4 {
                 let (text, ok) = Self::exec(link, "save")?;
                 if !ok {
                     break;
                 }
-                if previous.as_deref() == Some(text.as_str()) {
-                    self.script = text
-                        .lines()
-                        .map(str::trim)
-                        .filter(|l| !l.is_empty() && !l.starts_with('#'))
-                        .map(String::from)
-                        .collect();
+                let script: Vec<String> = text
+                    .lines()
+                    .map(str::trim)
+                    .filter(|l| !l.is_empty() && !l.starts_with('#'))
+                    .map(String::from)
+                    .collect();
+                if !script.is_empty() && previous.as_ref() == Some(&script) {
+                    self.script = script;
                     break;
                 }
-                previous = Some(text);
+                previous = Some(script);
             }
         }
         self.update_states(&vars)?;

@@ -65,13 +65,17 @@ pub fn run_scaling(a: &BenchArgs) -> Result<()> {
     cfg.command = std::env::args().collect::<Vec<_>>().join(" ");
     let report =
         scaling::run(&cfg, &plan).map_err(|e| CliError::Usage(format!("bench --scaling: {e}")))?;
-    println!("{}", report.markdown());
-    eprintln!(
-        "bench: wrote {0}/report.md, {0}/report.json and {1} plots",
-        cfg.out.display(),
-        report.plots.len()
-    );
+    wrote(&report.markdown(), &cfg.out, report.plots.len());
     Ok(())
+}
+
+/// Prints a run's Markdown report and where its files are.
+fn wrote(markdown: &str, out: &std::path::Path, plots: usize) {
+    println!("{markdown}");
+    eprintln!(
+        "bench: wrote {0}/report.md, {0}/report.json and {plots} plots",
+        out.display()
+    );
 }
 
 /// Runs the suite; prints the Markdown report and where the files are.
@@ -102,12 +106,7 @@ pub fn run(a: &BenchArgs) -> Result<()> {
     };
     cfg.command = std::env::args().collect::<Vec<_>>().join(" ");
     let report = suite::run(&cfg).map_err(|e| CliError::Usage(format!("bench: {e}")))?;
-    println!("{}", report.markdown());
-    eprintln!(
-        "bench: wrote {0}/report.md, {0}/report.json and {1} plots",
-        cfg.out.display(),
-        report.plots.len()
-    );
+    wrote(&report.markdown(), &cfg.out, report.plots.len());
     Ok(())
 }
 
