@@ -442,7 +442,9 @@ impl Importer {
                 .collect();
             (i, dropped, build)
         };
-        // Our previous mirror of a subsystem goes first, so its services can be re-created.
+        // Our previous mirror of a subsystem goes first, so its services can be re-created;
+        // what is left of them (held open by local subscribers) is ours, not a conflict.
+        let rebuilt: Vec<String> = dropped.iter().map(|m| m.owner_sub.clone()).collect();
         drop(dropped);
         let local: Vec<(String, Vec<String>)> = bus
             .list_states()
@@ -452,9 +454,10 @@ impl Importer {
         let mut built = Vec::new();
         for (sub, entries) in build {
             let name = format!("{}{sub}", rule.prefix);
-            if local
-                .iter()
-                .any(|(s, writers)| *s == name && !writers.contains(&me))
+            if !rebuilt.contains(&sub)
+                && local
+                    .iter()
+                    .any(|(s, writers)| *s == name && !writers.contains(&me))
             {
                 warn!(
                     "not importing {sub} from {}: subsystem {name:?} already exists in domain {:?} \
