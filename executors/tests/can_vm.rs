@@ -675,15 +675,25 @@ fn slcan_through_the_kernel() {
     };
     let ticks = (b.ticks - a.ticks) as f64;
     for i in 0..3 {
-        // Never more than one per tick (the counts are read a little after each stats
-        // message: a few ticks either way). Fewer when the emulated kernel's slcan worker falls
-        // behind and frames wait in slcan0's queue: they still flow.
+        // Frames flow in the window: fewer than one per tick when the emulated kernel's slcan
+        // worker falls behind and frames wait in slcan0's queue, more when such a backlog drains
+        // into it. So "never more than one per tick" is checked over the whole run: every frame
+        // the motor ever got against every tick the executor ever ran, plus the bring-up's few
+        // frames and the ticks between the stats message and the counts read after it.
         let per_tick = (fb[i] - fa[i]) as f64 / ticks;
-        println!("  slcan0: motor {}: {per_tick:.3} frames per tick", i + 1);
+        println!(
+            "  slcan0: motor {}: {per_tick:.3} frames per tick in the window, {} frames in {} ticks in all",
+            i + 1,
+            fb[i],
+            b.ticks
+        );
+        assert!(per_tick >= 0.3, "motor {}: {per_tick}", i + 1);
         assert!(
-            (0.3..=1.1).contains(&per_tick),
-            "motor {}: {per_tick}",
-            i + 1
+            fb[i] <= b.ticks + 50,
+            "motor {}: {} frames in {} ticks",
+            i + 1,
+            fb[i],
+            b.ticks
         );
     }
 

@@ -50,6 +50,11 @@ pub enum Verdict {
     /// packet damaged from the watchdog's firing to the safe state), the executor's
     /// `WATCHDOG` published in time.
     Resent,
+    /// Safe and kept, later than the limit (and the resending) only by the executor's own
+    /// measured tick lateness in the episode, at real-time priority: the kernel ran the trip
+    /// tick late, the executor's count of ticks was kept. Counted apart so that a machine's
+    /// latency shows as such and never hides in "in time".
+    LateTick,
     /// Every joint safe and kept, but at least one after the deadline.
     Late,
     /// A joint left its safe state (or held a position the device was not at).
@@ -214,8 +219,14 @@ impl Episode {
                 .joints
                 .iter()
                 .all(|j| j.flagged_ms.is_some_and(|f| f <= self.limit_ms));
-            if flagged_in_time && self.worst_ms.is_some_and(|w| w <= self.limit_ms + resend) {
+            let within = |allowance: f64| {
+                self.worst_ms
+                    .is_some_and(|w| w <= self.limit_ms + allowance)
+            };
+            if flagged_in_time && within(resend) {
                 Verdict::Resent
+            } else if self.executors_rt && within(resend + self.tick_lateness_ms.unwrap_or(0.0)) {
+                Verdict::LateTick
             } else {
                 Verdict::Late
             }
@@ -309,6 +320,21 @@ mod tests {
         e.joints[1].safe_ms = Some(531.0);
         e.close(None);
         assert_eq!(e.verdict, Verdict::Late);
+        // The trip tick ran 1.6 ms late at real-time priority: late only by the machine.
+        e.damaged_towards_devices = 0;
+        e.joints[1].safe_ms = Some(506.1);
+        e.tick_lateness_ms = Some(1.6);
+        e.close(None);
+        assert_eq!(e.verdict, Verdict::LateTick);
+        e.joints[1].safe_ms = Some(506.7);
+        e.close(None);
+        assert_eq!(e.verdict, Verdict::Late);
+        // Without real-time priority that lateness is part of the limit itself.
+        e.executors_rt = false;
+        e.joints[1].safe_ms = Some(506.1);
+        e.close(None);
+        assert_eq!(e.verdict, Verdict::InTime);
+        e.executors_rt = true;
         e.joints[0].left_ms = Some(600.0);
         e.joints[0].left_to = Some("torque off".into());
         e.close(None);

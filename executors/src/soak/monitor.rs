@@ -151,8 +151,8 @@ pub struct Watched {
     pub last_command_ns: Option<u64>,
     /// The controller death under way: followed joint by joint until the campaign closes it.
     pub episode: Option<Episode>,
-    /// Deaths judged, by verdict: in time, resent, late, unsafe, never safe.
-    pub verdicts: [u64; 5],
+    /// Deaths judged, by verdict: in time, resent, late tick, late, unsafe, never safe.
+    pub verdicts: [u64; 6],
     /// The latest safe state of a death, from its last command (ms).
     pub safe_worst_ms: f64,
     /// Late, unsafe and never-safe deaths, whole (at most [`KEPT`]).
@@ -198,16 +198,17 @@ impl Watched {
         let k = match e.verdict {
             Verdict::InTime => 0,
             Verdict::Resent => 1,
-            Verdict::Late => 2,
-            Verdict::Unsafe => 3,
-            Verdict::Never => 4,
+            Verdict::LateTick => 2,
+            Verdict::Late => 3,
+            Verdict::Unsafe => 4,
+            Verdict::Never => 5,
         };
         self.verdicts[k] += 1;
         if let Some(w) = e.worst_ms {
             self.safe_worst_ms = self.safe_worst_ms.max(w);
         }
         if k >= 2 {
-            self.unsafe_events += (k >= 3) as u64;
+            self.unsafe_events += (k >= 4) as u64;
             eprint!("soak: {}", e.describe());
             if self.bad_episodes.len() < KEPT {
                 self.bad_episodes.push(e.clone());

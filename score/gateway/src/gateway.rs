@@ -303,28 +303,16 @@ impl Gateway {
             (vars, generation) = Self::list(link)?;
         }
         if !vars.is_empty() {
-            // The script comes back in several `Output` frames and nothing says how many: one
-            // lost on the link would leave a script missing lines, which a restore would then
-            // replay. Kept only when two answers in a row agree, and never empty while the
-            // board has variables (two answers whose every frame was lost agree too, and an
-            // empty script would leave the next empty board unrestored for good).
-            let mut previous: Option<Vec<String>> = None;
+            let mut vote = ScriptVote::default();
             for _ in 0..4 {
                 let (text, ok) = Self::exec(link, "save")?;
                 if !ok {
                     break;
                 }
-                let script: Vec<String> = text
-                    .lines()
-                    .map(str::trim)
-                    .filter(|l| !l.is_empty() && !l.starts_with('#'))
-                    .map(String::from)
-                    .collect();
-                if !script.is_empty() && previous.as_ref() == Some(&script) {
+                if let Some(script) = vote.offer(&text) {
                     self.script = script;
                     break;
                 }
-                previous = Some(script);
             }
         }
         self.update_states(&vars)?;
@@ -590,5 +578,68 @@ impl Gateway {
             }
         );
         Ok(())
+    }
+}
+
+/// The board's script from successive answers to `save`. The script comes back in several
+/// `Output` frames and nothing says how many: one lost on the link would leave a script missing
+/// lines, which a restore would then replay. So a script is kept only when two answers in a row
+/// agree, and never an empty one (asked only while the board has variables: two answers whose
+/// every frame was lost agree too, and an empty script would leave the next empty board
+/// unrestored for good).
+#[derive(Default)]
+struct ScriptVote(Option<Vec<String>>);
+
+impl ScriptVote {
+    /// One more answer: the script, once two in a row agree.
+    fn offer(&mut self, text: &str) -> Option<Vec<String>> {
+        let script: Vec<String> = text
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with('#'))
+            .map(String::from)
+            .collect();
+        if !script.is_empty() && self.0.as_ref() == Some(&script) {
+            return Some(script);
+        }
+        self.0 = Some(script);
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ScriptVote;
+
+    #[test]
+    fn a_script_is_kept_when_two_answers_agree_without_comments_or_blanks() {
+        let mut vote = ScriptVote::default();
+        assert_eq!(vote.offer("# saved\nx = adc0\n"), None);
+        assert_eq!(
+            vote.offer("# saved\n\nx = adc0\n"),
+            Some(vec!["x = adc0".to_string()])
+        );
+    }
+
+    #[test]
+    fn an_answer_that_lost_a_frame_is_outvoted() {
+        let mut vote = ScriptVote::default();
+        assert_eq!(vote.offer("x = adc0\n"), None);
+        assert_eq!(vote.offer("x = adc0\ny = x * 2\n"), None);
+        assert_eq!(
+            vote.offer("x = adc0\ny = x * 2\n"),
+            Some(vec!["x = adc0".to_string(), "y = x * 2".to_string()])
+        );
+    }
+
+    /// Two answers whose every frame was lost agree too: keeping that would leave the next
+    /// empty board unrestored for good (the board of the hour's campaign, 44 minutes in).
+    #[test]
+    fn two_empty_answers_are_never_a_script() {
+        let mut vote = ScriptVote::default();
+        for _ in 0..4 {
+            assert_eq!(vote.offer(""), None);
+        }
+        assert_eq!(vote.offer("# only a comment\n"), None);
     }
 }

@@ -8,9 +8,8 @@ mod support;
 
 use std::net::UdpSocket;
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
-use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use conductor_bus::Domain;
@@ -39,12 +38,13 @@ fn run_ok(mut c: Command) -> String {
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
-/// System users created for the test, deleted (with their groups) on drop.
-struct Users(Vec<String>);
+/// System users created for the test, deleted (with their groups) on drop, with the
+/// directory they run the staged program from.
+struct Users(Vec<String>, Stage);
 
 impl Users {
     fn create(tags: &[&str]) -> Self {
-        let mut users = Users(Vec::new());
+        let mut users = Users(Vec::new(), Stage::new(&tags.concat()));
         for tag in tags {
             let name = format!("cdt{}{tag}", std::process::id());
             let mut c = as_root("useradd");
@@ -77,7 +77,7 @@ impl Users {
     }
 
     fn conductor(&self, i: usize, d: &Domain) -> Command {
-        let mut c = self.cmd(i, staged().join("conductor").to_str().unwrap());
+        let mut c = self.cmd(i, self.1.path("conductor").to_str().unwrap());
         c.arg("--domain").arg(d.name());
         c
     }
@@ -103,28 +103,41 @@ impl Drop for Users {
 
 /// The `conductor` program and the test manifest where every user can reach them: the checkout
 /// may sit under a directory only root may enter (`/root`), which the test users could not.
-/// Linked (or copied across file systems) once per test binary into `/tmp/conductor-perm-<pid>/`.
-fn staged() -> &'static Path {
-    static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let dir = PathBuf::from(format!("/tmp/conductor-perm-{}", std::process::id()));
+/// Linked (or copied across file systems) into `/tmp/conductor-perm-<pid><tag>/`, removed on
+/// drop: a copy left behind would pin a whole debug binary in /tmp after every run.
+struct Stage(PathBuf);
+
+impl Stage {
+    fn new(tag: &str) -> Self {
+        let dir = PathBuf::from(format!("/tmp/conductor-perm-{}{tag}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o755)).unwrap();
-        let exe = dir.join("conductor");
+        let stage = Stage(dir);
+        std::fs::set_permissions(&stage.0, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let exe = stage.path("conductor");
         let _ = std::fs::remove_file(&exe);
         if std::fs::hard_link(env!("CARGO_BIN_EXE_conductor"), &exe).is_err() {
             std::fs::copy(env!("CARGO_BIN_EXE_conductor"), &exe).unwrap();
         }
         std::fs::set_permissions(&exe, std::fs::Permissions::from_mode(0o755)).unwrap();
-        let manifest = dir.join("two-subsystems.toml");
+        let manifest = stage.path("two-subsystems.toml");
         std::fs::copy(
             workspace().join("executors/tests/manifests/two-subsystems.toml"),
             &manifest,
         )
         .unwrap();
         std::fs::set_permissions(&manifest, std::fs::Permissions::from_mode(0o644)).unwrap();
-        dir
-    })
+        stage
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for Stage {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// Removes what a domain left on disk (files of users that are about to be deleted).
@@ -171,7 +184,7 @@ fn only_the_executors_user_can_read_or_command_its_domain() {
     let (svc, other) = (0, 1);
     let svc_uid = users.uid(svc);
     let d = Domain::unique("perm").unwrap();
-    let manifest = staged().join("two-subsystems.toml");
+    let manifest = users.1.path("two-subsystems.toml");
     // The binaries must be reachable by the service user (the workspace is world-readable).
     let mut launch = users.conductor(svc, &d);
     launch
@@ -273,7 +286,7 @@ fn a_domain_claimed_by_another_user_is_refused_not_used() {
     let mut launch = users.conductor(svc, &d);
     launch
         .arg("launch")
-        .arg(staged().join("two-subsystems.toml"));
+        .arg(users.1.path("two-subsystems.toml"));
     launch.args(["--no-rt", "--quiet"]);
     let err = stderr_of(launch);
     assert!(
