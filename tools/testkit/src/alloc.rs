@@ -1,11 +1,22 @@
 //! A global allocator that counts the current thread's allocations while it measures.
 //!
-//! ```ignore
+//! ```
 //! #[global_allocator]
 //! static GLOBAL: conductor_testkit::alloc::Counting = conductor_testkit::alloc::Counting;
 //!
-//! let (_, allocations) = conductor_testkit::alloc::measure(|| rt_tick());
-//! assert_eq!(allocations, 0);
+//! fn rt_tick(buf: &mut [f64; 4]) -> f64 {
+//!     buf.iter_mut().for_each(|x| *x += 1.0);
+//!     buf.iter().sum()
+//! }
+//!
+//! fn main() {
+//!     let mut buf = [0.0; 4];
+//!     let (sum, allocations) = conductor_testkit::alloc::measure(|| rt_tick(&mut buf));
+//!     assert_eq!((sum, allocations), (4.0, 0));
+//!     // What allocates is seen.
+//!     let (_, allocations) = conductor_testkit::alloc::measure(|| vec![0u8; 64]);
+//!     assert_eq!(allocations, 1);
+//! }
 //! ```
 //!
 //! Only allocations made by the measuring thread, inside [`measure`], are counted, so the test
