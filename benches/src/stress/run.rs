@@ -3,7 +3,7 @@
 
 use std::collections::HashMap;
 use std::ffi::OsString;
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -40,6 +40,14 @@ pub enum RunError {
         status: std::process::ExitStatus,
         /// Its standard error.
         stderr: String,
+    },
+    /// A helper process had not exited `grace` after the window closed (it was killed).
+    #[error("the {what} process had not exited {grace:?} after the window closed (killed)")]
+    Hung {
+        /// `logger`, `subscriber` or `probe`.
+        what: &'static str,
+        /// How long it was given.
+        grace: Duration,
     },
     /// The executor published no statistics.
     #[error("the executor published no statistics within {0:?}")]
@@ -281,18 +289,59 @@ fn spawn(tool: &[OsString], args: &[OsString], what: &str) -> Result<Child, RunE
         )))
 }
 
-fn finish(child: Child, what: &'static str) -> Result<Vec<String>, RunError> {
-    let out = child
-        .wait_with_output()
-        .map_err(io(format!("waiting for the {what}")))?;
-    if !out.status.success() {
+/// How long a helper may take to exit after the window closed: it exits on its own then, and
+/// one that does not (a reader left behind by an overloaded executor) is killed, so that a run
+/// ends with an error instead of hanging.
+const HELPER_GRACE: Duration = Duration::from_secs(60);
+
+/// Reads a pipe to its end on a thread of its own (a helper that writes more than a pipe holds
+/// must not block on it while we wait for it to exit).
+fn drain<R: Read + Send + 'static>(pipe: Option<R>) -> Option<std::thread::JoinHandle<Vec<u8>>> {
+    pipe.map(|mut r| {
+        std::thread::spawn(move || {
+            let mut v = Vec::new();
+            let _ = r.read_to_end(&mut v);
+            v
+        })
+    })
+}
+
+/// Waits for a helper until `deadline` (killing it then) and returns its output lines.
+fn finish(
+    mut child: Child,
+    what: &'static str,
+    deadline: Instant,
+) -> Result<Vec<String>, RunError> {
+    let (stdout, stderr) = (drain(child.stdout.take()), drain(child.stderr.take()));
+    let status = loop {
+        if let Some(status) = child
+            .try_wait()
+            .map_err(io(format!("waiting for the {what}")))?
+        {
+            break status;
+        }
+        if Instant::now() >= deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(RunError::Hung {
+                what,
+                grace: HELPER_GRACE,
+            });
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    let join = |h: Option<std::thread::JoinHandle<Vec<u8>>>| {
+        h.and_then(|h| h.join().ok()).unwrap_or_default()
+    };
+    let (stdout, stderr) = (join(stdout), join(stderr));
+    if !status.success() {
         return Err(RunError::Helper {
             what,
-            status: out.status,
-            stderr: String::from_utf8_lossy(&out.stderr).trim().to_string(),
+            status,
+            stderr: String::from_utf8_lossy(&stderr).trim().to_string(),
         });
     }
-    Ok(BufReader::new(&out.stdout[..])
+    Ok(BufReader::new(&stdout[..])
         .lines()
         .map_while(Result::ok)
         .collect())
@@ -504,12 +553,13 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
     let cpu_b = cpu(&pids);
     let wall_b = monotonic_ns();
 
-    let log_lines = logger.map(|l| finish(l, "logger")).transpose();
+    let deadline = Instant::now() + HELPER_GRACE;
+    let log_lines = logger.map(|l| finish(l, "logger", deadline)).transpose();
     let reader_lines: Vec<_> = readers
         .into_iter()
-        .map(|r| finish(r, "subscriber"))
+        .map(|r| finish(r, "subscriber", deadline))
         .collect();
-    let probe_lines = probe.map(|p| finish(p, "probe")).transpose();
+    let probe_lines = probe.map(|p| finish(p, "probe", deadline)).transpose();
     for p in ready.iter().chain([&go]) {
         let _ = std::fs::remove_file(p);
     }

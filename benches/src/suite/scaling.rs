@@ -161,6 +161,31 @@ pub struct ScalingPoint {
     pub lost: u64,
     /// Samples the other readers read in the window, all of them.
     pub other_samples: u64,
+    /// Why the point has no figures: its run failed (the sweep goes on without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl ScalingPoint {
+    /// A point whose run failed: no figures, the reason kept.
+    fn failed((states, subscribers, executors): (usize, usize, usize), error: String) -> Self {
+        Self {
+            states,
+            subscribers,
+            executors,
+            ticks: 0,
+            misses: 0,
+            achieved_hz: 0.0,
+            cpu_percent: None,
+            cpu_us_per_tick: None,
+            lateness: Quantiles::default(),
+            sample_to_controller: None,
+            samples: 0,
+            lost: 0,
+            other_samples: 0,
+            error: Some(error),
+        }
+    }
 }
 
 /// One sweep: its points (indices into [`ScalingReport::points`]) and the fits over them.
@@ -245,15 +270,25 @@ pub fn run(cfg: &Config, plan: &Plan) -> Result<ScalingReport, SuiteError> {
             "{} Hz: {states} states × {subscribers} subscribers × {executors} executors",
             plan.rate_hz
         ));
-        let r = point_run(cfg, plan.rate_hz, (states, subscribers, executors))?;
-        if r.misses > 0 {
-            progress.note(&format!(
-                "{states} states × {subscribers} subscribers × {executors} executors: {} \
-                 missed deadlines of {} ticks",
-                r.misses, r.ticks
-            ));
+        let at = (states, subscribers, executors);
+        let what = format!("{states} states × {subscribers} subscribers × {executors} executors");
+        match point_run(cfg, plan.rate_hz, at) {
+            Ok(r) => {
+                if r.misses > 0 {
+                    progress.note(&format!(
+                        "{what}: {} missed deadlines of {} ticks",
+                        r.misses, r.ticks
+                    ));
+                }
+                points.push(point(&r));
+            }
+            // One point beyond what the machine can run (1 000 states on a loaded VM) must not
+            // cost the whole sweep: it is reported as failed and left out of the fits.
+            Err(e) => {
+                progress.note(&format!("{what}: FAILED: {e}"));
+                points.push(ScalingPoint::failed(at, e.to_string()));
+            }
         }
-        points.push(point(&r));
         progress.done(cfg.seconds + STRESS_OVERHEAD);
     }
     progress.finish();
@@ -374,6 +409,7 @@ pub fn point(r: &RunResult) -> ScalingPoint {
             .iter()
             .map(|s| num::<u64>(s, "count"))
             .sum(),
+        error: None,
     }
 }
 
@@ -515,6 +551,17 @@ impl ScalingReport {
                  lost |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
             );
             for p in sw.points.iter().filter_map(|&i| self.points.get(i)) {
+                if let Some(e) = &p.error {
+                    let _ = writeln!(
+                        s,
+                        "| {} | {} | {} | failed: {} ||||||||||",
+                        p.states,
+                        p.subscribers,
+                        p.executors,
+                        e.replace('|', "/").replace('\n', " ")
+                    );
+                    continue;
+                }
                 let (p50, p99) = p.sample_to_controller.map_or_else(
                     || ("–".to_string(), "–".to_string()),
                     |q| (fmt_ns(q.p50_ns), fmt_ns(q.p99_ns)),
@@ -569,7 +616,10 @@ impl ScalingReport {
                 cpu_r2,
                 lat,
                 lat_r2,
-                sw.points.len()
+                sw.points
+                    .iter()
+                    .filter(|&&i| self.points.get(i).is_some_and(|p| p.error.is_none()))
+                    .count()
             );
         }
         plots_section(&mut s, &self.plots);
@@ -588,6 +638,34 @@ mod tests {
         assert_eq!(p.iter().filter(|q| **q == (41, 1, 1)).count(), 1);
         assert!(p.contains(&(1000, 1, 1)) && p.contains(&(41, 16, 1)) && p.contains(&(41, 1, 4)));
         assert_eq!(Plan::new(true).points().len(), 3 + 2 + 1);
+    }
+
+    #[test]
+    fn a_failed_point_is_left_out_of_the_fits() {
+        let ok = |states: usize, us: f64| ScalingPoint {
+            cpu_us_per_tick: Some(us),
+            error: None,
+            ..ScalingPoint::failed((states, 1, 1), String::new())
+        };
+        let points = vec![
+            ok(1, 10.0),
+            ok(41, 50.0),
+            ScalingPoint::failed((1000, 1, 1), "the logger process had not exited".into()),
+        ];
+        let s = sweep(
+            "states",
+            String::new(),
+            vec![0, 1, 2],
+            &points,
+            |p| p.states,
+            1.0,
+            "",
+        );
+        let f = s.cpu_fit.unwrap();
+        assert!(
+            (f.slope - 1.0).abs() < 1e-9 && (f.intercept - 9.0).abs() < 1e-9,
+            "{f:?}"
+        );
     }
 
     #[test]
