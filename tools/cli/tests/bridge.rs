@@ -804,6 +804,73 @@ fn launch_runs_and_supervises_the_bridge_of_a_manifest() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// A host's catalog changes (its bridge restarted exporting more states) while a local
+/// subscriber on the importing side holds the mirror's services open: the importer rebuilds
+/// its own mirror, it does not refuse it as another subsystem of the same name (which left it
+/// STALE for good, the intermittent failure of the launch test above).
+#[test]
+fn a_changed_catalog_rebuilds_a_mirror_that_local_readers_hold_open() {
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let port = free_tcp_ports(1);
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let leg = launch_leg("brcat");
+    let exporter = |states: &str| {
+        Proc::spawn(conductor(&leg.a).args([
+            "bridge",
+            "--host",
+            "robot",
+            "--listen",
+            &endpoint,
+            "--export",
+            states,
+            "--heartbeat-ms",
+            &HEARTBEAT_MS.to_string(),
+        ]))
+    };
+    let first = exporter("leg/knee");
+    first.wait_line(
+        "ready bridge robot: exporting 1 state(s)",
+        Duration::from_secs(30),
+    );
+    let importer =
+        Proc::spawn(conductor(&leg.b).args(importer_args("ws", &["--connect", &endpoint], &leg.a)));
+    importer.wait_line("ready bridge ws", Duration::from_secs(30));
+    wait_listed(&leg.bus_b, "leg/knee", Duration::from_secs(30));
+    let mut held = StateSubscriber::with_buffer(&leg.bus_b, "leg/knee", 256).unwrap();
+    wait_sample(&mut held, PATIENCE, "a fresh mirror", |s| {
+        s.status & status::STALE == 0
+    });
+    assert!(
+        leg.bus_b.resolve("leg/hip").is_err(),
+        "hip is not exported yet"
+    );
+
+    // The robot's bridge comes back exporting both states: a new catalog.
+    first.stop();
+    let second = exporter("leg/*");
+    second.wait_line(
+        "ready bridge robot: exporting 2 state(s)",
+        Duration::from_secs(30),
+    );
+    wait_listed(&leg.bus_b, "leg/hip", PATIENCE);
+    let restarted = conductor_bus::monotonic_ns();
+    // The reader that held the old mirror open reads fresh samples of the new one.
+    wait_sample(
+        &mut held,
+        PATIENCE,
+        "fresh knee samples after the rebuild",
+        |s| s.status & status::STALE == 0 && s.t_sample_ns > restarted,
+    );
+    let mut hip = StateSubscriber::with_buffer(&leg.bus_b, "leg/hip", 64).unwrap();
+    wait_sample(&mut hip, PATIENCE, "fresh hip samples", |s| {
+        s.status & status::STALE == 0
+    });
+    drop(second);
+    let err = importer.stop();
+    assert!(!err.contains("not importing"), "{err}");
+    let _ = std::fs::remove_dir_all(&leg.dir);
+}
+
 /// The leg executor launched in a fresh domain `a`, and a second fresh domain `b`.
 struct Leg {
     a: Domain,
