@@ -282,3 +282,76 @@ fn a_round_answered_by_nothing_is_sent_again() {
         "the poll is sent again once the round is overdue"
     );
 }
+
+/// An enable sent again after lost rounds holds where the motor is, not where it was read
+/// before the losses: a limp joint may still be coasting (after a watchdog trip), and holding
+/// an old reading would pull it back there. Once the reading is older than `HOLD_FRESH_NS`,
+/// the motor is polled again first.
+#[test]
+fn an_enable_resent_after_lost_rounds_polls_the_coasting_joint_again() {
+    use conductor_devices::{MitSpecial, Op, Phase, ReplyData, Startup};
+    let cred = Credential::id(1);
+    let mut d = MitMotor::new(cred, 20.0, 1.0);
+    let at = |tick: u64| TickCtx {
+        tick,
+        now_ns: tick * PERIOD_NS,
+    };
+    let flush = |d: &mut MitMotor, tick| {
+        let mut out = Bounded::with_capacity(8);
+        d.flush(at(tick), &mut out);
+        out.as_slice().iter().map(|r| r.op).collect::<Vec<Op>>()
+    };
+    let state = |d: &mut MitMotor, op: Op, tick: u64, p: f32| {
+        let mut ups = Bounded::with_capacity(8);
+        let data = ReplyData::Mit {
+            p,
+            v: 5.0,
+            t: 0.0,
+            temperature: None,
+        };
+        d.reply(
+            &Reply::answer(cred, op, data, tick, at(tick).now_ns),
+            &mut ups,
+        );
+    };
+    let poll = Op::MitSpecial(MitSpecial::Exit);
+    let enter = Op::MitSpecial(MitSpecial::Enter);
+    d.bring_up(Startup::Enable, at(0));
+    assert_eq!(flush(&mut d, 0), [poll]);
+    // The joint coasts at 5 rad/s: read at 1.0 rad.
+    state(&mut d, poll, 0, 1.0);
+    let hold_at = |p: f32| Op::Mit {
+        p,
+        v: 0.0,
+        kp: 20.0,
+        kd: 1.0,
+        t: 0.0,
+    };
+    assert_eq!(flush(&mut d, 1), [enter, hold_at(1.0)]);
+    // Every enable round is lost on the line (word of it missing comes each time).
+    let mut tick = 1;
+    let sent = loop {
+        let mut ups = Bounded::with_capacity(8);
+        d.reply(
+            &Reply::missing(cred, hold_at(1.0), tick, at(tick).now_ns),
+            &mut ups,
+        );
+        tick += 1;
+        let ops = flush(&mut d, tick);
+        if ops != [enter, hold_at(1.0)] || tick > 40 {
+            break ops;
+        }
+        assert!(
+            at(tick).now_ns <= 20_000_000 + PERIOD_NS,
+            "tick {tick}: a hold at a reading {} ms old",
+            at(tick).now_ns / 1_000_000
+        );
+    };
+    assert_eq!(sent, [poll], "tick {tick}: polled again before enabling");
+    assert_eq!(d.status().phase, Phase::Enabling);
+    // Read again where it has coasted to; enabled there.
+    state(&mut d, poll, tick, 1.12);
+    assert_eq!(flush(&mut d, tick + 1), [enter, hold_at(1.12)]);
+    state(&mut d, hold_at(1.12), tick + 1, 1.12);
+    assert_eq!(d.status().phase, Phase::Enabled);
+}

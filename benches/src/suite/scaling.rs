@@ -562,7 +562,7 @@ impl ScalingReport {
                     );
                     continue;
                 }
-                let (p50, p99) = p.sample_to_controller.map_or_else(
+                let (p50, p99) = p.sample_to_controller.filter(|q| q.count > 0).map_or_else(
                     || ("–".to_string(), "–".to_string()),
                     |q| (fmt_ns(q.p50_ns), fmt_ns(q.p99_ns)),
                 );

@@ -21,10 +21,12 @@
 
 use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
-    DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, ROUND_TIMEOUT_NS,
+    DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, LOST_ROUNDS, ROUND_TIMEOUT_NS,
 };
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
+
+use super::reg_device::HOLD_FRESH_NS;
 
 /// Channel indices of [`MitMotor`].
 pub mod mit_channel {
@@ -103,6 +105,11 @@ pub struct MitMotor {
     enabled: bool,
     commanded: bool,
     last_p: Option<f32>,
+    /// When `last_p` was sampled.
+    last_p_ns: u64,
+    /// Re-probes of the present enable (a resent enable whose position reading had grown old);
+    /// bounded by [`LOST_ROUNDS`].
+    realigns: u8,
     temperature: Option<u8>,
     fault_tick: Option<u64>,
     faults: u64,
@@ -134,6 +141,8 @@ impl MitMotor {
             enabled: false,
             commanded: false,
             last_p: None,
+            last_p_ns: 0,
+            realigns: 0,
             temperature: None,
             fault_tick: None,
             faults: 0,
@@ -216,6 +225,20 @@ impl MitMotor {
                     self.go(Step::Probe);
                     return self.drive(ctx, out);
                 };
+                let again = self.life.tries > 0 || self.life.lost > 0;
+                if again && ctx.now_ns.saturating_sub(self.last_p_ns) > HOLD_FRESH_NS {
+                    // Sent again after lost rounds: where it was read is not where it is now
+                    // (a limp joint still coasting). Poll again and enable there, within a
+                    // bound: a line that keeps losing the round gives up.
+                    if self.realigns >= LOST_ROUNDS {
+                        self.life.refuse_enable();
+                        self.enabled = false;
+                        return false;
+                    }
+                    self.realigns += 1;
+                    self.go(Step::Probe);
+                    return self.drive(ctx, out);
+                }
                 self.push(Op::MitSpecial(MitSpecial::Enter), ctx, out);
                 let cmd = self.hold_at(p);
                 self.push(cmd, ctx, out);
@@ -296,6 +319,7 @@ impl MitMotor {
     }
 
     fn start_enable(&mut self) {
+        self.realigns = 0;
         self.life.goal = Goal::Drive;
         self.life.user_off = false;
         self.dirty = false;
@@ -436,6 +460,7 @@ impl Device for MitMotor {
                 temperature,
             } => {
                 self.last_p = Some(p);
+                self.last_p_ns = reply.t_sample_ns;
                 if temperature.is_some() {
                     self.temperature = temperature;
                     if self.fault_tick != Some(reply.tick) {
@@ -545,6 +570,7 @@ impl Device for MitMotor {
     }
 
     fn bring_up(&mut self, startup: Startup, _ctx: TickCtx) {
+        self.realigns = 0;
         self.life.bring_up(startup);
         self.enabled = false;
         self.commanded = false;
