@@ -12,7 +12,8 @@
 //! Probe    exit-motor-mode frame: the reply says it is there, and where
 //! Enable   enter-motor-mode frame, then a command holding the present position with the
 //!          configured gains (entering motor mode never resumes an old target); enabled
-//!          when the motor answers the command
+//!          when the motor answers the command. Sent again after lost rounds, it polls
+//!          first once the position reading is older than `HOLD_FRESH_NS`
 //! ```
 //!
 //! MIT motors have no model number and no configuration on the bus (their IDs, CAN master ID and
