@@ -65,6 +65,32 @@ pub mod qos {
             .enable_safe_overflow(true)
     }
 
+    /// Subscribers of a subsystem's snapshot.
+    pub const SNAPSHOT_SUBSCRIBERS: usize = 16;
+    /// Most snapshots a snapshot subscriber may queue (a reader wants the newest only).
+    pub const SNAPSHOT_BUFFER: usize = 4;
+
+    /// A snapshot service's settings: as a state's (two publishers, history of one, safe
+    /// overflow), with queues of at most [`SNAPSHOT_BUFFER`] snapshots.
+    pub fn snapshot_service<T, S>(
+        b: publish_subscribe::Builder<T, (), S>,
+    ) -> publish_subscribe::Builder<T, (), S>
+    where
+        T: core::fmt::Debug
+            + iceoryx2::prelude::IceoryxSend
+            + iceoryx2::prelude::ZeroCopySend
+            + ?Sized
+            + 'static,
+        S: Service,
+    {
+        b.max_publishers(STATE_PUBLISHERS)
+            .max_subscribers(SNAPSHOT_SUBSCRIBERS)
+            .max_nodes(MAX_NODES)
+            .history_size(1)
+            .subscriber_max_buffer_size(SNAPSHOT_BUFFER)
+            .enable_safe_overflow(true)
+    }
+
     /// A tick event's settings: listeners, notifiers, nodes.
     pub fn tick_event<S: Service>(b: event::Builder<S>) -> event::Builder<S> {
         b.max_listeners(TICK_LISTENERS)
@@ -223,7 +249,8 @@ impl Bus {
             -> iceoryx2::service::builder::publish_subscribe::Builder<T, (), RtIpc>,
     ) -> Result<publish_subscribe::PortFactory<RtIpc, T, ()>>
     where
-        T: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + 'static,
+        T: core::fmt::Debug + iceoryx2::prelude::IceoryxSend + ?Sized + 'static,
+        iceoryx2::service::builder::publish_subscribe::Builder<T, (), RtIpc>: CreateOrOpen<T>,
     {
         use iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError as CE;
         use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError as OE;
@@ -234,12 +261,12 @@ impl Bus {
         let mut round = 0;
         loop {
             round += 1;
-            match builder().create_with_attributes(attrs) {
+            match builder().create_with(attrs) {
                 Ok(f) => return Ok(f),
                 Err(CE::AlreadyExists) | Err(CE::IsBeingCreatedByAnotherInstance) => {}
                 Err(e) => return Err(BusError::iceoryx(format!("creating {name:?}"), e)),
             }
-            match builder().open_with_attributes(&verifier(attrs)?) {
+            match builder().open_with(&verifier(attrs)?) {
                 Ok(f) => return Ok(f),
                 // Gone (or going) since the create found it: create it again.
                 Err(OE::DoesNotExist | OE::IsMarkedForDestruction | OE::HangsInCreation)
@@ -259,16 +286,77 @@ impl Bus {
 
     /// Opens (or creates) the tick event of `subsystem`.
     pub(crate) fn tick_event(&self, subsystem: &str) -> Result<EventService> {
-        let name = naming::tick(subsystem);
+        self.event(&naming::tick(subsystem), ServiceKind::Tick)
+    }
+
+    /// Opens (or creates) the snapshot event of `subsystem` (beside the snapshot pub/sub service
+    /// of the same name).
+    pub(crate) fn snapshot_event(&self, subsystem: &str) -> Result<EventService> {
+        self.event(&naming::snapshot(subsystem), ServiceKind::Snapshot)
+    }
+
+    /// Opens (or creates) the event `name` of `kind`, with the tick event's settings.
+    fn event(&self, name: &str, kind: ServiceKind) -> Result<EventService> {
         qos::tick_event(
             self.node()
-                .service_builder(&Self::service_name(&name)?)
+                .service_builder(&Self::service_name(name)?)
                 .event(),
         )
-        .open_or_create_with_attributes(&verifier(&metadata::base_attributes(ServiceKind::Tick)?)?)
-        .map_err(|e| BusError::iceoryx(format!("opening tick event {name:?}"), e))
+        .open_or_create_with_attributes(&verifier(&metadata::base_attributes(kind)?)?)
+        .map_err(|e| BusError::iceoryx(format!("opening event {name:?}"), e))
     }
 }
+
+/// Creating and opening a pub/sub service, which iceoryx2 implements apart for a fixed-size
+/// payload and for a slice: one retry loop serves both.
+pub(crate) trait CreateOrOpen<T: core::fmt::Debug + iceoryx2::prelude::IceoryxSend + ?Sized> {
+    /// `create_with_attributes`.
+    fn create_with(
+        self,
+        attrs: &AttributeSpecifier,
+    ) -> core::result::Result<
+        publish_subscribe::PortFactory<RtIpc, T, ()>,
+        iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError,
+    >;
+    /// `open_with_attributes`.
+    fn open_with(
+        self,
+        verifier: &AttributeVerifier,
+    ) -> core::result::Result<
+        publish_subscribe::PortFactory<RtIpc, T, ()>,
+        iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError,
+    >;
+}
+
+macro_rules! create_or_open {
+    ($(<$t:ident> $payload:ty),*) => {$(
+        impl<$t> CreateOrOpen<$payload>
+            for iceoryx2::service::builder::publish_subscribe::Builder<$payload, (), RtIpc>
+        where
+            $t: core::fmt::Debug + iceoryx2::prelude::ZeroCopySend + 'static,
+        {
+            fn create_with(
+                self,
+                attrs: &AttributeSpecifier,
+            ) -> core::result::Result<
+                publish_subscribe::PortFactory<RtIpc, $payload, ()>,
+                iceoryx2::service::builder::publish_subscribe::PublishSubscribeCreateError,
+            > {
+                self.create_with_attributes(attrs)
+            }
+            fn open_with(
+                self,
+                verifier: &AttributeVerifier,
+            ) -> core::result::Result<
+                publish_subscribe::PortFactory<RtIpc, $payload, ()>,
+                iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError,
+            > {
+                self.open_with_attributes(verifier)
+            }
+        }
+    )*};
+}
+create_or_open!(<T> T, <T> [T]);
 
 /// An attribute verifier that requires every key/value of `spec`.
 fn verifier(spec: &AttributeSpecifier) -> Result<AttributeVerifier> {

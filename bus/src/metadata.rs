@@ -59,6 +59,8 @@ pub enum ServiceKind {
     Tick,
     /// Pub/sub of `ExecutorStats`.
     Stats,
+    /// Pub/sub of `[StateSample]`, one per tick, every state of the subsystem; and its event.
+    Snapshot,
 }
 
 impl ServiceKind {
@@ -69,6 +71,7 @@ impl ServiceKind {
             ServiceKind::Commands => "commands",
             ServiceKind::Tick => "tick",
             ServiceKind::Stats => "stats",
+            ServiceKind::Snapshot => "snapshot",
         }
     }
 }

@@ -1,4 +1,5 @@
-//! Service naming: `conductor/<subsystem>/<state>`, `.../commands`, `.../tick`, `.../stats`.
+//! Service naming: `conductor/<subsystem>/<state>`, `.../commands`, `.../tick`, `.../stats`,
+//! `.../snapshot`.
 
 use crate::error::{BusError, Result};
 
@@ -10,8 +11,10 @@ pub const COMMANDS: &str = "commands";
 pub const TICK: &str = "tick";
 /// Last path element of the executor stats service.
 pub const STATS: &str = "stats";
+/// Last path element of the per-tick snapshot (a pub/sub service and an event of that name).
+pub const SNAPSHOT: &str = "snapshot";
 /// Names a state may not take because the subsystem's own services use them.
-pub const RESERVED: [&str; 4] = [COMMANDS, TICK, STATS, "surface"];
+pub const RESERVED: [&str; 5] = [COMMANDS, TICK, STATS, SNAPSHOT, "surface"];
 
 /// Longest subsystem or state name.
 pub const MAX_NAME_LEN: usize = 64;
@@ -38,7 +41,9 @@ pub fn validate(what: &'static str, name: &str) -> Result<()> {
         return bad("must not start with '.' or '-'");
     }
     if what == "state" && RESERVED.contains(&name) {
-        return bad("reserved for the subsystem's own services (commands, tick, stats, surface)");
+        return bad(
+            "reserved for the subsystem's own services (commands, tick, stats, snapshot, surface)",
+        );
     }
     Ok(())
 }
@@ -61,6 +66,11 @@ pub fn tick(subsystem: &str) -> String {
 /// `conductor/<subsystem>/stats`.
 pub fn stats(subsystem: &str) -> String {
     format!("{ROOT}/{subsystem}/{STATS}")
+}
+
+/// `conductor/<subsystem>/snapshot`.
+pub fn snapshot(subsystem: &str) -> String {
+    format!("{ROOT}/{subsystem}/{SNAPSHOT}")
 }
 
 /// Splits `conductor/<subsystem>/<leaf>` into `(subsystem, leaf)`.

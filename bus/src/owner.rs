@@ -20,6 +20,7 @@ use crate::metadata::{
     base_attributes, command_attributes, state_attributes, ServiceKind, StateMeta,
 };
 use crate::naming;
+use crate::snapshot::{SnapshotWriter, NOT_YET};
 use crate::variant::RtIpc;
 
 /// Declaration of one state an executor owns.
@@ -64,11 +65,25 @@ impl StateSpec {
     }
 }
 
-/// Publishes every state of one subsystem and its tick event.
+/// Publishes every state of one subsystem, its snapshot and its tick event.
+///
+/// Two ways to publish a tick: [`publish_at`](Self::publish_at) each state then
+/// [`notify_tick`](Self::notify_tick) (snapshot, then tick event), or, what an executor does,
+/// [`stage_at`](Self::stage_at) each state, [`flush_states`](Self::flush_states), which sends the
+/// snapshot first, so a snapshot reader does not wait for the per-state services, then
+/// `notify_tick`.
 pub struct StatePublisher {
     subsystem: String,
     ports: Vec<Publisher<RtIpc, StateSample, ()>>,
     seqs: Vec<u64>,
+    /// Every state's last sample, by index: the snapshot.
+    latest: Vec<StateSample>,
+    /// Indices staged since the last flush, each once (`is_staged`).
+    staged: Vec<usize>,
+    is_staged: Vec<bool>,
+    snapshot: SnapshotWriter,
+    /// States were published since the last snapshot: `notify_tick` sends one first.
+    snapshot_due: bool,
     notifier: Notifier<RtIpc>,
     // Keep the services alive for as long as we publish on them.
     _services: Vec<StateService>,
@@ -111,14 +126,21 @@ impl StatePublisher {
             services.push(service);
             ports.push(port);
         }
+        let snapshot = SnapshotWriter::create(bus, subsystem, ports.len())?;
         let tick = bus.tick_event(subsystem)?;
         let notifier = tick
             .notifier_builder()
             .create()
             .map_err(|e| BusError::iceoryx("tick notifier", e))?;
+        let n = ports.len();
         Ok(Self {
             subsystem: subsystem.into(),
-            seqs: vec![0; ports.len()],
+            seqs: vec![0; n],
+            latest: vec![NOT_YET; n],
+            staged: Vec::with_capacity(n),
+            is_staged: vec![false; n],
+            snapshot,
+            snapshot_due: false,
             ports,
             notifier,
             _services: services,
@@ -168,16 +190,73 @@ impl StatePublisher {
         status: u32,
         t_publish_ns: u64,
     ) -> Result<usize> {
-        let (Some(port), Some(seq)) = (self.ports.get(index), self.seqs.get_mut(index)) else {
+        self.record(index, tick, t_sample_ns, value, status, t_publish_ns)?;
+        self.snapshot_due = true;
+        self.send_state(index)
+    }
+
+    /// Records a sample of state `index` for the tick that [`flush_states`](Self::flush_states)
+    /// sends; `seq` is assigned here. Staging a state twice in a tick sends its last sample.
+    #[inline]
+    pub fn stage_at(
+        &mut self,
+        index: usize,
+        tick: u64,
+        t_sample_ns: u64,
+        value: f64,
+        status: u32,
+        t_publish_ns: u64,
+    ) -> Result<()> {
+        self.record(index, tick, t_sample_ns, value, status, t_publish_ns)?;
+        if let Some(staged @ false) = self.is_staged.get_mut(index) {
+            *staged = true;
+            self.staged.push(index);
+        }
+        Ok(())
+    }
+
+    /// Sends the staged tick: the snapshot (and its event) first, then each staged state's
+    /// sample; [`notify_tick`](Self::notify_tick) comes after. Nothing is sent when nothing was
+    /// staged. A failed send does not stop the others; it is counted in the result.
+    #[inline]
+    pub fn flush_states(&mut self) -> Flushed {
+        let mut out = Flushed::default();
+        if self.staged.is_empty() {
+            return out;
+        }
+        self.snapshot_due = false;
+        if self.snapshot.send(&self.latest).is_err() {
+            out.errors += 1;
+        }
+        for k in 0..self.staged.len() {
+            let index = self.staged[k];
+            self.is_staged[index] = false;
+            match self.send_state(index) {
+                Ok(_) => out.published += 1,
+                Err(_) => out.errors += 1,
+            }
+        }
+        self.staged.clear();
+        out
+    }
+
+    fn record(
+        &mut self,
+        index: usize,
+        tick: u64,
+        t_sample_ns: u64,
+        value: f64,
+        status: u32,
+        t_publish_ns: u64,
+    ) -> Result<()> {
+        let (Some(seq), Some(latest)) = (self.seqs.get_mut(index), self.latest.get_mut(index))
+        else {
             return Err(BusError::NoSuchIndex {
                 index,
                 count: self.ports.len(),
             });
         };
-        let sample = port
-            .loan_uninit()
-            .map_err(|e| BusError::iceoryx("loaning a state sample", e))?;
-        let sample = sample.write_payload(StateSample {
+        *latest = StateSample {
             seq: *seq,
             tick,
             t_sample_ns,
@@ -185,12 +264,20 @@ impl StatePublisher {
             value,
             status,
             reserved: 0,
-        });
-        let reached = sample
-            .send()
-            .map_err(|e| BusError::iceoryx("sending a state sample", e))?;
+        };
         *seq += 1;
-        Ok(reached)
+        Ok(())
+    }
+
+    /// Sends state `index`'s recorded sample on its own service.
+    #[inline]
+    fn send_state(&mut self, index: usize) -> Result<usize> {
+        let (port, sample) = (&self.ports[index], self.latest[index]);
+        port.loan_uninit()
+            .map_err(|e| BusError::iceoryx("loaning a state sample", e))?
+            .write_payload(sample)
+            .send()
+            .map_err(|e| BusError::iceoryx("sending a state sample", e))
     }
 
     /// Number of subscribers currently attached to state `index` (0 if out of range).
@@ -200,13 +287,31 @@ impl StatePublisher {
             .map_or(0, |s| s.dynamic_config().number_of_subscribers())
     }
 
-    /// Wakes every tick listener once; call after the batch of a tick is published.
+    /// Wakes every tick listener once; call after the batch of a tick is published. States
+    /// published with `publish_at` since the last snapshot are first sent as one.
     #[inline]
     pub fn notify_tick(&mut self) -> Result<usize> {
-        self.notifier
+        let snapshot = if core::mem::take(&mut self.snapshot_due) {
+            self.snapshot.send(&self.latest).map(drop)
+        } else {
+            Ok(())
+        };
+        let woken = self
+            .notifier
             .notify()
-            .map_err(|e| BusError::iceoryx("notifying tick", e))
+            .map_err(|e| BusError::iceoryx("notifying tick", e))?;
+        snapshot?;
+        Ok(woken)
     }
+}
+
+/// What [`StatePublisher::flush_states`] sent.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Flushed {
+    /// State samples sent on their own services.
+    pub published: usize,
+    /// Sends (snapshot, state samples) that failed.
+    pub errors: u64,
 }
 
 /// Receives the command frames of one subsystem.

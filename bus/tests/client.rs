@@ -148,3 +148,60 @@ fn the_command_watchdog_is_read_from_the_commands_service() {
     );
     assert!(client.command_watchdog("absent").is_err());
 }
+
+/// Both ways of publishing a tick leave one snapshot per tick: `publish` + `notify_tick`, and the
+/// executor's `stage_at` + `flush_states` (snapshot before the states' own samples). A state not
+/// yet published is `NOT_YET`; one not published this tick keeps its last sample.
+#[test]
+fn every_tick_leaves_one_snapshot_of_every_state() {
+    use conductor_bus::{status, SnapshotReader, NOT_YET};
+
+    let d = Domain::unique("snap").unwrap();
+    let bus = Bus::open(&d, "t").unwrap();
+    let (mut p, _rx) = owner(&bus, &["a", "b", "c"]);
+    let mut snaps = SnapshotReader::new(&bus, "sys").unwrap();
+    let mut b = conductor_bus::StateSubscriber::new(&bus, "sys/b").unwrap();
+    assert!(
+        snaps.latest().unwrap().is_none(),
+        "nothing before the first tick"
+    );
+
+    p.publish(0, 1, 1_000, 0.5, 0).unwrap();
+    p.notify_tick().unwrap();
+    let s = snaps.wait(Duration::from_secs(5)).unwrap().expect("tick 1");
+    assert_eq!((s.len(), s.tick(), s[0].value, s[0].seq), (3, 1, 0.5, 0));
+    assert_eq!(s[1].status, status::STALE);
+    assert!(s[1].value.is_nan() && s[2].t_sample_ns == NOT_YET.t_sample_ns);
+    drop(s);
+
+    // Tick 2, staged: `a` and `b`; `c` still never published. `b` staged twice sends its last.
+    p.stage_at(0, 2, 2_000, 0.75, 0, 2_100).unwrap();
+    p.stage_at(1, 2, 2_000, 9.0, 0, 2_100).unwrap();
+    p.stage_at(1, 2, 2_000, -1.0, status::CLAMPED, 2_100)
+        .unwrap();
+    assert!(b.receive().unwrap().is_none(), "staged, not sent");
+    let sent = p.flush_states();
+    assert_eq!((sent.published, sent.errors), (2, 0));
+    p.notify_tick().unwrap();
+    let s = snaps.wait(Duration::from_secs(5)).unwrap().expect("tick 2");
+    assert_eq!(s.tick(), 2);
+    assert_eq!((s[0].value, s[0].seq, s[0].t_publish_ns), (0.75, 1, 2_100));
+    let b2 = b.receive().unwrap().expect("b's own sample of tick 2");
+    assert_eq!(s[1], b2, "the snapshot carries what b's service carries");
+    assert_eq!((b2.value, b2.status, b2.seq), (-1.0, status::CLAMPED, 1));
+    assert!(b.receive().unwrap().is_none(), "b was sent once");
+    assert!(s[2].value.is_nan());
+    drop(s);
+
+    // Tick 3 publishes only `a`: `b` keeps its tick-2 sample.
+    p.stage_at(0, 3, 3_000, 1.0, 0, 3_100).unwrap();
+    assert_eq!(p.flush_states().published, 1);
+    let s = snaps
+        .latest()
+        .unwrap()
+        .expect("tick 3, sent before the tick event");
+    assert_eq!((s.tick(), s[1]), (3, b2));
+    // Nothing staged: no snapshot.
+    assert_eq!(p.flush_states().published, 0);
+    assert!(snaps.latest().unwrap().is_none());
+}

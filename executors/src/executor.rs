@@ -175,14 +175,15 @@ impl Executor {
         let publisher = &mut self.publisher;
         let mut errors = 0;
         // One clock read per tick: every state of the tick carries the time its first state
-        // was published (bus/ABI.md, `t_publish_ns`).
+        // was published (bus/ABI.md, `t_publish_ns`). Staged, not sent: the flush sends the
+        // subsystem's snapshot first, then the per-state samples; the tick event follows.
         let mut t_publish_ns = 0;
-        let published = stages.tick(wake.slot, wake.sched_ns, now_ns, |p| {
+        let ticked = stages.tick(wake.slot, wake.sched_ns, now_ns, |p| {
             if t_publish_ns == 0 {
                 t_publish_ns = monotonic_ns();
             }
             if publisher
-                .publish_at(
+                .stage_at(
                     p.index,
                     p.tick,
                     p.t_sample_ns,
@@ -195,8 +196,10 @@ impl Executor {
                 errors += 1;
             }
         });
-        h.publish_errors += errors;
-        if published > 0 && publisher.notify_tick().is_err() {
+        let flushed = publisher.flush_states();
+        h.publish_errors += errors + flushed.errors;
+        stages.profile_mut().mark(TickPhase::Publish);
+        if ticked > 0 && publisher.notify_tick().is_err() {
             h.publish_errors += 1;
         }
         stages.profile_mut().mark(TickPhase::TickEvent);

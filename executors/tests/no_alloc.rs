@@ -3,7 +3,9 @@
 
 mod support;
 
-use conductor_bus::{prepare_thread, Bus, Controller, StateSubscriber, StatsSubscriber};
+use conductor_bus::{
+    prepare_thread, Bus, Controller, SnapshotReader, StateSubscriber, StatsSubscriber,
+};
 use conductor_executor::executor::Executor;
 use conductor_executor::schedule::Wake;
 use conductor_manifest::Manifest;
@@ -34,6 +36,8 @@ fn ten_thousand_ticks_allocate_nothing() {
     let mut exec = Executor::new(&bus, &sub).unwrap();
     let mut ctl = Controller::new(&bus);
     let mut sub_j0 = StateSubscriber::with_buffer(&bus, "arm/j0", 64).unwrap();
+    // A snapshot reader too, so the tick sends the snapshot to a subscriber and its listener.
+    let mut snapshots = SnapshotReader::new(&bus, "arm").unwrap();
     let mut stats = None;
 
     // Synthetic time: tick k at 5 ms steps (200 Hz), so 10 000 ticks span 50 s of executor time:
@@ -59,6 +63,7 @@ fn ten_thousand_ticks_allocate_nothing() {
         tick(&mut exec, k);
         k += 1;
         sub_j0.drain(|_| {}).unwrap();
+        snapshots.latest().unwrap();
         if stats.is_none() {
             stats = StatsSubscriber::new(&bus, "arm").ok();
         }
@@ -66,6 +71,7 @@ fn ten_thousand_ticks_allocate_nothing() {
     let names: Vec<String> = (0..6).map(|j| format!("arm/j{j}")).collect();
     let mut allocations = 0;
     let mut received = 0;
+    let mut snapshots_read = 0;
     for i in 0..10_000u64 {
         // The controller talks for 100 ticks, then is silent for 100 (the watchdog fires).
         if (i / 100) % 2 == 0 && i % 4 == 0 {
@@ -78,11 +84,20 @@ fn ten_thousand_ticks_allocate_nothing() {
         }
         allocations += tick(&mut exec, k);
         k += 1;
-        received += sub_j0.drain(|_| {}).unwrap();
+        let mut j0 = None;
+        received += sub_j0.drain(|s| j0 = Some(*s)).unwrap();
+        let snap = snapshots.latest().unwrap().expect("a snapshot every tick");
+        assert_eq!(
+            Some(snap[0]),
+            j0,
+            "the snapshot carries j0's sample of the tick"
+        );
+        snapshots_read += 1;
     }
     assert_eq!(allocations, 0, "the tick allocated");
     // The work really happened.
     assert_eq!(received, 10_000, "one sample of j0 per tick");
+    assert_eq!(snapshots_read, 10_000);
     let s = stats.unwrap().latest().unwrap().unwrap();
     assert!(s.watchdog_trips >= 40, "{}", s.watchdog_trips);
     assert!(s.frames_applied >= 1_000);

@@ -12,7 +12,7 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use conductor_bus::{status, Bus, Controller, StatsSubscriber};
+use conductor_bus::{status, Bus, Controller, SnapshotReader, StateSample, StatsSubscriber};
 use conductor_executor::launcher::{Launch, LaunchError};
 use nix::sys::signal::{kill, Signal};
 use nix::unistd::Pid;
@@ -56,6 +56,75 @@ fn a_frame_of_six_setpoints_is_applied_in_one_tick() {
     drop(bus);
     launch.stop();
     launch.wait().unwrap();
+}
+
+/// A subsystem's snapshot is its tick as one sample: one entry per state in index order, each
+/// the very sample that state's own service carries (a slower state keeps its last one), woken
+/// by the snapshot event, tick after tick.
+#[test]
+fn the_snapshot_carries_each_tick_of_every_state_as_their_services_do() {
+    let (d, _guard) = private_domain("snapshot");
+    let launch = Launch::start(&test_manifest("two-subsystems.toml"), options(&d)).unwrap();
+    let bus = Bus::open(&d, "test-snapshot").unwrap();
+    let mut infos: Vec<_> = bus
+        .list_states()
+        .unwrap()
+        .into_iter()
+        .filter(|s| s.subsystem == "sensors")
+        .collect();
+    infos.sort_by_key(|s| s.meta.index);
+    let names: Vec<String> = infos.iter().map(|s| s.qualified_name()).collect();
+    assert_eq!(names, ["sensors/a", "sensors/b", "sensors/c"]);
+    let rec = Recorder::start(&d, &names.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut reader = SnapshotReader::new(&bus, "sensors").unwrap();
+
+    // 250 Hz for about a second: every wake-up hands out the newest snapshot.
+    let mut snaps: Vec<Vec<StateSample>> = Vec::new();
+    let end = Instant::now() + Duration::from_secs(1);
+    while Instant::now() < end {
+        if let Some(s) = reader.wait(Duration::from_millis(100)).unwrap() {
+            snaps.push(s.to_vec());
+        }
+    }
+    std::thread::sleep(Duration::from_millis(50));
+    let recs = rec.finish();
+    launch.stop();
+    launch.wait().unwrap();
+
+    assert!(
+        snaps.len() > 100,
+        "only {} snapshots in 1 s at 250 Hz",
+        snaps.len()
+    );
+    let mut slower_held = [0usize; 3];
+    for pair in snaps.windows(2) {
+        assert!(
+            pair[1][0].tick > pair[0][0].tick,
+            "ticks go forward: {pair:?}"
+        );
+    }
+    for snap in &snaps {
+        assert_eq!(snap.len(), 3, "one entry per state");
+        let tick = snap[0].tick; // `a` runs at the base rate: published every tick
+        for (i, entry) in snap.iter().enumerate() {
+            assert!(
+                entry.tick <= tick,
+                "entry {i} is from a later tick: {snap:?}"
+            );
+            slower_held[i] += usize::from(entry.tick < tick);
+            assert!(
+                recs[i].samples.contains(entry),
+                "{}'s entry in the snapshot of tick {tick} is not a sample its service \
+                 carried: {entry:?}",
+                names[i]
+            );
+        }
+    }
+    assert_eq!(slower_held[0], 0);
+    assert!(
+        slower_held[1] > 0 && slower_held[2] > slower_held[1],
+        "the 125 Hz and 50 Hz states keep their last sample between their ticks: {slower_held:?}"
+    );
 }
 
 #[test]

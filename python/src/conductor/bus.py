@@ -12,7 +12,7 @@ from .errors import BusError, InvalidName
 _DOMAIN = re.compile(r"^[A-Za-z0-9_-]{1,48}$")
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
 #: Names the bus reserves for a subsystem's own services.
-RESERVED_STATE_NAMES = ("commands", "tick", "stats", "surface")
+RESERVED_STATE_NAMES = ("commands", "tick", "stats", "snapshot", "surface")
 
 
 def receive_copy(port, kind, what: str):

@@ -1,0 +1,218 @@
+//! A subsystem's tick as one sample: `conductor/<subsystem>/snapshot`.
+//!
+//! Beside each state's own service, the owner publishes every tick one slice of
+//! [`StateSample`]s, entry `i` being the state of index `i` as of that tick, and then notifies the
+//! event of the same name. A controller of the whole subsystem wakes once, takes one sample and
+//! reads every joint of the same tick: one IPC hop instead of one per state, and it does not wait
+//! for the per-state services, which the owner publishes after the snapshot (`bus/ABI.md`,
+//! *Snapshot*).
+
+use core::ops::Deref;
+use core::time::Duration;
+use std::time::Instant;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::{FileDescriptorBased, MessagingPattern, ZeroCopySend};
+use iceoryx2::sample::Sample;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
+
+use crate::abi::{status, StateSample};
+use crate::bus::{qos, Bus, EventService};
+use crate::error::{BusError, Result};
+use crate::metadata::{base_attributes, ServiceKind};
+use crate::naming;
+use crate::variant::RtIpc;
+
+type SnapshotService = PortFactory<RtIpc, [StateSample], ()>;
+
+/// What a snapshot holds for a state that has not been published yet: no time, no value.
+pub const NOT_YET: StateSample = StateSample {
+    seq: 0,
+    tick: 0,
+    t_sample_ns: 0,
+    t_publish_ns: 0,
+    value: f64::NAN,
+    status: status::STALE,
+    reserved: 0,
+};
+
+/// The owner's side: one slice per tick and the event that announces it. Sized at creation; a
+/// send loans, copies and notifies without allocating.
+pub(crate) struct SnapshotWriter {
+    port: Publisher<RtIpc, [StateSample], ()>,
+    notifier: Notifier<RtIpc>,
+    _service: SnapshotService,
+    _event: EventService,
+}
+
+impl SnapshotWriter {
+    /// Creates (or, for a restarted owner, re-opens) the snapshot of `subsystem` for `states`
+    /// states.
+    pub(crate) fn create(bus: &Bus, subsystem: &str, states: usize) -> Result<Self> {
+        let name = naming::snapshot(subsystem);
+        let attrs = base_attributes(ServiceKind::Snapshot)?;
+        let service =
+            bus.create_or_reopen_pubsub::<[StateSample]>(&name, &attrs, qos::snapshot_service)?;
+        let port = service
+            .publisher_builder()
+            .initial_max_slice_len(states.max(1))
+            .create()
+            .map_err(|e| BusError::iceoryx(format!("publisher for {name:?}"), e))?;
+        let event = bus.snapshot_event(subsystem)?;
+        let notifier = event
+            .notifier_builder()
+            .create()
+            .map_err(|e| BusError::iceoryx("snapshot notifier", e))?;
+        Ok(Self {
+            port,
+            notifier,
+            _service: service,
+            _event: event,
+        })
+    }
+
+    /// Publishes `samples` as one snapshot and wakes its listeners.
+    #[inline]
+    pub(crate) fn send(&mut self, samples: &[StateSample]) -> Result<usize> {
+        let sample = self
+            .port
+            .loan_slice_uninit(samples.len())
+            .map_err(|e| BusError::iceoryx("loaning a snapshot", e))?;
+        let reached = sample
+            .write_from_slice(samples)
+            .send()
+            .map_err(|e| BusError::iceoryx("sending a snapshot", e))?;
+        self.notifier
+            .notify()
+            .map_err(|e| BusError::iceoryx("notifying a snapshot", e))?;
+        Ok(reached)
+    }
+}
+
+/// One tick of a subsystem, read in place in shared memory: entry `i` is the state of index `i`
+/// (the `conductor.index` attribute). A state not published on this tick (a slower rate) keeps
+/// its last sample, with its own `tick`; one never published is [`NOT_YET`].
+pub struct Snapshot(Sample<RtIpc, [StateSample], ()>);
+
+impl Snapshot {
+    /// The tick the snapshot was published on (the newest `tick` of its entries).
+    pub fn tick(&self) -> u64 {
+        self.iter().map(|s| s.tick).max().unwrap_or(0)
+    }
+}
+
+impl Deref for Snapshot {
+    type Target = [StateSample];
+
+    fn deref(&self) -> &[StateSample] {
+        self.0.payload()
+    }
+}
+
+impl core::fmt::Debug for Snapshot {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("Snapshot")
+            .field("tick", &self.tick())
+            .field("states", &self.len())
+            .finish()
+    }
+}
+
+/// Reads a subsystem's snapshots: sleeps on their event, hands out the newest.
+pub struct SnapshotReader {
+    port: Subscriber<RtIpc, [StateSample], ()>,
+    listener: Listener<RtIpc>,
+    _service: SnapshotService,
+    _event: EventService,
+}
+
+impl core::fmt::Debug for SnapshotReader {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str("SnapshotReader")
+    }
+}
+
+impl SnapshotReader {
+    /// Opens the snapshot of `subsystem`, which its owner must have created.
+    pub fn new(bus: &Bus, subsystem: &str) -> Result<Self> {
+        naming::validate("subsystem", subsystem)?;
+        let name = naming::snapshot(subsystem);
+        let Some(details) = bus.details(&name, MessagingPattern::PublishSubscribe)? else {
+            return Err(BusError::UnknownSubsystem {
+                name: subsystem.into(),
+                domain: bus.domain().name().into(),
+                service: name,
+            });
+        };
+        // SAFETY: type_name() has no preconditions.
+        let tn = unsafe { StateSample::type_name() };
+        bus.check_conductor_service(&name, &details, ServiceKind::Snapshot, tn)?;
+        let service = bus
+            .node()
+            .service_builder(&Bus::service_name(&name)?)
+            .publish_subscribe::<[StateSample]>()
+            .open()
+            .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
+        let port = service
+            .subscriber_builder()
+            .buffer_size(2)
+            .create()
+            .map_err(|e| BusError::iceoryx("snapshot subscriber", e))?;
+        let event = bus.snapshot_event(subsystem)?;
+        let listener = event
+            .listener_builder()
+            .create()
+            .map_err(|e| BusError::iceoryx("snapshot listener", e))?;
+        Ok(Self {
+            port,
+            listener,
+            _service: service,
+            _event: event,
+        })
+    }
+
+    /// The newest snapshot queued since the last call, without waiting (older ones are dropped:
+    /// a snapshot is a latest value).
+    pub fn latest(&mut self) -> Result<Option<Snapshot>> {
+        let mut newest = None;
+        loop {
+            match self.port.receive() {
+                Ok(Some(s)) => newest = Some(Snapshot(s)),
+                Ok(None) => return Ok(newest),
+                Err(e) => return Err(BusError::iceoryx("receiving a snapshot", e)),
+            }
+        }
+    }
+
+    /// The newest snapshot, sleeping on the snapshot event until one arrives or `timeout`
+    /// passes (`None` then).
+    pub fn wait(&mut self, timeout: Duration) -> Result<Option<Snapshot>> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            // Consume the wake-ups of what is about to be read, so the next wait sleeps.
+            self.listener
+                .try_wait(|_| {})
+                .map_err(|e| BusError::iceoryx("polling the snapshot event", e))?;
+            if let Some(s) = self.latest()? {
+                return Ok(Some(s));
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return Ok(None);
+            }
+            self.listener
+                .timed_wait(|_| {}, left)
+                .map_err(|e| BusError::iceoryx("waiting for a snapshot", e))?;
+        }
+    }
+
+    /// The event listener's file descriptor number, for foreign event loops (epoll, tokio).
+    pub fn raw_fd(&self) -> i32 {
+        // SAFETY: the descriptor is owned by `self.listener` and stays valid while `self` lives;
+        // only its number is reported.
+        unsafe { self.listener.file_descriptor().native_handle() }
+    }
+}
