@@ -15,6 +15,7 @@
 //!   `conductor-stress` program; its command line is the `cli` feature).
 
 pub mod percentiles;
+pub mod periodic;
 pub mod pingpong;
 pub mod publish_cost;
 pub mod stress;

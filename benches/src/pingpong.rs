@@ -119,7 +119,7 @@ pub enum PingPongError {
     Child(String),
 }
 
-fn iox(what: &str) -> impl FnOnce(String) -> PingPongError + '_ {
+pub(crate) fn iox(what: &str) -> impl FnOnce(String) -> PingPongError + '_ {
     move |e| PingPongError::Iox(format!("{what}: {e}"))
 }
 
@@ -132,14 +132,14 @@ pub fn pin(cpu: usize) {
     }
 }
 
-fn node(d: &Domain) -> Result<Node<RtIpc>, PingPongError> {
+pub(crate) fn node(d: &Domain) -> Result<Node<RtIpc>, PingPongError> {
     NodeBuilder::new()
         .config(d.iceoryx2_config())
         .create::<RtIpc>()
         .map_err(|e| PingPongError::Iox(format!("node: {e}")))
 }
 
-fn service_name(name: &str) -> Result<ServiceName, PingPongError> {
+pub(crate) fn service_name(name: &str) -> Result<ServiceName, PingPongError> {
     name.try_into()
         .map_err(|e| PingPongError::Iox(format!("service name {name:?}: {e:?}")))
 }
@@ -175,7 +175,7 @@ pub fn raw_state_service(
 }
 
 /// The raw tick event: a tick event's settings, no Conductor attributes.
-fn raw_event(
+pub(crate) fn raw_event(
     n: &Node<RtIpc>,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<RtIpc>, PingPongError> {
     qos::tick_event(n.service_builder(&service_name("bench/ev")?).event())
@@ -209,6 +209,9 @@ pub fn raw_publish(
 /// parent), else the child's outcome (the caller then exits).
 pub fn child_from_env() -> Option<Result<(), PingPongError>> {
     let role = std::env::var(ROLE_ENV).ok()?;
+    if let Some(args) = role.strip_prefix(crate::periodic::ROLE) {
+        return Some(crate::periodic::child(args));
+    }
     let Some((mode, domain)) = role.split_once(' ') else {
         return Some(Err(PingPongError::Child(format!(
             "{ROLE_ENV}={role:?}: expected \"<mode> <domain>\""
@@ -281,13 +284,7 @@ pub fn child(mode: Mode, domain: &str) -> Result<(), PingPongError> {
             }
         }
     }
-    let p = Percentiles::from_samples(&mut lat)
-        .ok_or_else(|| PingPongError::Child("no samples before the stop message".into()))?;
-    println!(
-        "ONEWAY {} {} {} {} {} {}",
-        p.count, p.min, p.p50, p.p99, p.p999, p.max
-    );
-    Ok(())
+    print_oneway(&mut lat)
 }
 
 /// The sending side of one mode, in the parent process.
@@ -318,9 +315,6 @@ impl PingPong {
     /// Starts the child (`child_program[0]` with the remaining arguments and [`ROLE_ENV`] set)
     /// in a fresh domain, waits for it and warms the path up with 1000 round trips.
     pub fn start(mode: Mode, child_program: &[OsString]) -> Result<PingPong, PingPongError> {
-        let (prog, args) = child_program
-            .split_first()
-            .ok_or_else(|| PingPongError::Child("no child program given".into()))?;
         let d = Domain::unique("benchlat")?;
         let n = node(&d)?;
         // Everything the child opens exists before it starts.
@@ -348,22 +342,7 @@ impl PingPong {
                 ..StateSpec::new("q", StateMeta::default())
             }],
         )?;
-        let mut child = Command::new(prog)
-            .args(args)
-            .env(ROLE_ENV, format!("{} {}", mode.name(), d.name()))
-            .stdout(Stdio::piped())
-            .spawn()
-            .map_err(|e| PingPongError::Child(format!("starting {prog:?}: {e}")))?;
-        let (tx, out) = std::sync::mpsc::channel();
-        let stdout = child
-            .stdout
-            .take()
-            .ok_or_else(|| PingPongError::Child("no stdout".into()))?;
-        std::thread::spawn(move || {
-            for l in BufReader::new(stdout).lines().map_while(Result::ok) {
-                let _ = tx.send(l);
-            }
-        });
+        let (child, out) = spawn_child(child_program, &format!("{} {}", mode.name(), d.name()))?;
         let mut s = PingPong {
             mode,
             raw,
@@ -377,16 +356,6 @@ impl PingPong {
             _event: ev,
             _node: n,
         };
-        match s.out.recv_timeout(Duration::from_secs(20)) {
-            Ok(l) if l == "READY" => {}
-            other => {
-                let _ = s.child.kill();
-                let _ = s.child.wait();
-                return Err(PingPongError::Child(format!(
-                    "expected READY, got {other:?}"
-                )));
-            }
-        }
         for _ in 0..1000 {
             s.round_trip()?;
         }
@@ -447,27 +416,80 @@ impl PingPong {
             .recv_timeout(Duration::from_secs(20))
             .map_err(|_| PingPongError::Child("no summary line".into()))?;
         let _ = self.child.wait();
-        let f: Vec<u64> = line
-            .strip_prefix("ONEWAY ")
-            .map(|r| {
-                r.split_whitespace()
-                    .filter_map(|x| x.parse().ok())
-                    .collect()
-            })
-            .unwrap_or_default();
-        if f.len() != 6 {
-            return Err(PingPongError::Child(format!("bad summary line {line:?}")));
-        }
-        Ok(Percentiles {
-            count: f[0] as usize,
-            min: f[1],
-            p50: f[2],
-            p99: f[3],
-            p999: f[4],
-            max: f[5],
-            mean: f64::NAN,
-        })
+        parse_oneway(&line)
     }
+}
+
+/// Starts `child_program` (program, then arguments) with [`ROLE_ENV`] = `role`, and waits for
+/// its `READY` line; returns it with the rest of its standard output, line by line.
+pub(crate) fn spawn_child(
+    child_program: &[OsString],
+    role: &str,
+) -> Result<(Child, Receiver<String>), PingPongError> {
+    let (prog, args) = child_program
+        .split_first()
+        .ok_or_else(|| PingPongError::Child("no child program given".into()))?;
+    let mut child = Command::new(prog)
+        .args(args)
+        .env(ROLE_ENV, role)
+        .stdout(Stdio::piped())
+        .spawn()
+        .map_err(|e| PingPongError::Child(format!("starting {prog:?}: {e}")))?;
+    let (tx, out) = std::sync::mpsc::channel();
+    let stdout = child
+        .stdout
+        .take()
+        .ok_or_else(|| PingPongError::Child("no stdout".into()))?;
+    std::thread::spawn(move || {
+        for l in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = tx.send(l);
+        }
+    });
+    match out.recv_timeout(Duration::from_secs(20)) {
+        Ok(l) if l == "READY" => Ok((child, out)),
+        other => {
+            let _ = child.kill();
+            let _ = child.wait();
+            Err(PingPongError::Child(format!(
+                "expected READY, got {other:?}"
+            )))
+        }
+    }
+}
+
+/// Prints the child's summary line, `ONEWAY <count> <min> <p50> <p99> <p99.9> <max>` (ns).
+pub(crate) fn print_oneway(lat: &mut [u64]) -> Result<(), PingPongError> {
+    let p = Percentiles::from_samples(lat)
+        .ok_or_else(|| PingPongError::Child("no samples before the stop message".into()))?;
+    println!(
+        "ONEWAY {} {} {} {} {} {}",
+        p.count, p.min, p.p50, p.p99, p.p999, p.max
+    );
+    Ok(())
+}
+
+/// Reads a child's summary line back (`mean` is not reported: NaN).
+pub(crate) fn parse_oneway(line: &str) -> Result<Percentiles, PingPongError> {
+    let f: Vec<u64> = line
+        .strip_prefix("ONEWAY ")
+        .map(|r| {
+            r.split_whitespace()
+                .filter_map(|x| x.parse().ok())
+                .collect()
+        })
+        .unwrap_or_default();
+    if f.len() != 6 {
+        return Err(PingPongError::Child(format!("bad summary line {line:?}")));
+    }
+    Ok(Percentiles {
+        count: f[0] as usize,
+        min: f[1],
+        p50: f[2],
+        p99: f[3],
+        p999: f[4],
+        max: f[5],
+        mean: f64::NAN,
+    })
 }
 
 /// Measures `samples` round trips of `mode` (after the warm-up) from a thread pinned to CPU 0,

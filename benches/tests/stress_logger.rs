@@ -1,5 +1,7 @@
 //! The stress test's external logger (`conductor-stress log`, a process of its own) sees every
-//! state of a launched manifest at its rate, without losses.
+//! state of a launched manifest at its rate, without losses, whether it subscribes to each state
+//! or reads the subsystems' snapshots; the one-way floor of the executor's shape measures what it
+//! publishes.
 
 use std::collections::HashMap;
 use std::process::Command;
@@ -51,30 +53,42 @@ fn an_external_subscriber_sees_every_state_at_its_rate() {
         "sensors/b",
         "sensors/c",
     ];
-    let out = conductor_testkit::run_ok(
-        Command::new(STRESS)
-            .args(["log", "--domain", d.name(), "--seconds", "2", "--states"])
-            .arg(states.join(",")),
-    );
+    // Two loggers over the same 2 s: one subscribed to every state, one reading the two
+    // subsystems' snapshots. Both must see every sample, each once.
+    let logger = |snapshot: bool| {
+        let mut c = Command::new(STRESS);
+        c.args(["log", "--domain", d.name(), "--seconds", "2", "--states"])
+            .arg(states.join(","));
+        if snapshot {
+            c.arg("--snapshot");
+        }
+        std::thread::spawn(move || conductor_testkit::run_ok(&mut c))
+    };
+    let (per_state, snapshots) = (logger(false), logger(true));
+    let outs = [per_state.join().unwrap(), snapshots.join().unwrap()];
     let bus = Bus::open(&d, "test").unwrap();
     let skipped = misses(&bus, "arm") + misses(&bus, "sensors");
-    let text = String::from_utf8(out.stdout).unwrap();
-    let rows: Vec<HashMap<String, String>> = text.lines().map(parse_line).collect();
-    assert_eq!(rows.len(), states.len(), "{text}");
-    let expected_rates = [200.0, 200.0, 200.0, 200.0, 200.0, 200.0, 250.0, 125.0, 50.0];
-    for (row, (name, rate)) in rows.iter().zip(states.iter().zip(expected_rates)) {
-        assert_eq!(row["state"], *name);
-        assert_eq!(row["rate_hz"].parse::<f64>().unwrap(), rate, "{name}");
-        assert_eq!(row["missed"], "0", "{name}: the subscriber lost samples");
-        // Samples are counted by their sample time over a 2 s window: one per period, ±1 for
-        // where the window's edges fall. A deadline the executor missed (its slot skipped,
-        // reported in its stats) publishes nothing, so it may lower the count.
-        let count: f64 = row["count"].parse().unwrap();
-        let want = rate * 2.0;
-        assert!(
-            count <= want + 1.0 && count >= want - 1.0 - skipped as f64,
-            "{name}: {count} samples in 2 s at {rate} Hz ({skipped} deadline misses): {text}"
-        );
+    for (out, how) in outs.iter().zip(["per-state subscribers", "snapshots"]) {
+        let text = String::from_utf8(out.stdout.clone()).unwrap();
+        let rows: Vec<HashMap<String, String>> = text.lines().map(parse_line).collect();
+        assert_eq!(rows.len(), states.len(), "{how}: {text}");
+        let expected_rates = [200.0, 200.0, 200.0, 200.0, 200.0, 200.0, 250.0, 125.0, 50.0];
+        for (row, (name, rate)) in rows.iter().zip(states.iter().zip(expected_rates)) {
+            assert_eq!(row["state"], *name);
+            assert_eq!(row["rate_hz"].parse::<f64>().unwrap(), rate, "{name}");
+            assert_eq!(row["missed"], "0", "{name}: {how} lost samples");
+            assert_eq!(row["repeats"], "0", "{name}: {how} saw a sample twice");
+            // Samples are counted by their sample time over a 2 s window: one per period, ±1
+            // for where the window's edges fall. A deadline the executor missed (its slot
+            // skipped, reported in its stats) publishes nothing, so it may lower the count.
+            let count: f64 = row["count"].parse().unwrap();
+            let want = rate * 2.0;
+            assert!(
+                count <= want + 1.0 && count >= want - 1.0 - skipped as f64,
+                "{name}: {how}: {count} samples in 2 s at {rate} Hz ({skipped} deadline \
+                 misses): {text}"
+            );
+        }
     }
     drop(bus);
     launch.stop();
@@ -83,4 +97,30 @@ fn an_external_subscriber_sees_every_state_at_its_rate() {
     // is the precondition of removing its node counter.
     let _ = unsafe { remove_global_mgmt_segment::<RtIpc>(d.iceoryx2_config()) };
     let _ = std::fs::remove_dir_all(d.root_path());
+}
+
+/// The periodic floor ([`conductor_benches::periodic`]) reads every tick it publishes, in both
+/// shapes, and reports each sample's latency once.
+#[test]
+fn the_periodic_floor_reads_every_published_sample() {
+    use conductor_benches::periodic::{measure, Periodic};
+    for snapshot in [false, true] {
+        let p = Periodic {
+            rate_hz: 200.0,
+            states: 3,
+            snapshot,
+            seconds: 0.5,
+            cpu: 0,
+            priority: 10,
+            buffer: 64,
+        };
+        let r = measure(&p, &[STRESS.into()]).unwrap();
+        // 0.5 s measured at 200 Hz: 100 ticks of 3 samples (± a tick at the warm-up's edge).
+        assert!(
+            (297..=303).contains(&r.count),
+            "snapshot={snapshot}: {} samples",
+            r.count
+        );
+        assert!(r.min > 0 && r.p50 >= r.min && r.max >= r.p99, "{r:?}");
+    }
 }

@@ -67,8 +67,9 @@ pub mod qos {
 
     /// Subscribers of a subsystem's snapshot.
     pub const SNAPSHOT_SUBSCRIBERS: usize = 16;
-    /// Most snapshots a snapshot subscriber may queue (a reader wants the newest only).
-    pub const SNAPSHOT_BUFFER: usize = 4;
+    /// Most snapshots a snapshot subscriber may queue (a controller wants the newest only; a
+    /// logger that must see every tick reads them all).
+    pub const SNAPSHOT_BUFFER: usize = 16;
 
     /// A snapshot service's settings: as a state's (two publishers, history of one, safe
     /// overflow), with queues of at most [`SNAPSHOT_BUFFER`] snapshots.

@@ -24,6 +24,7 @@ use crate::bus::{qos, Bus, EventService};
 use crate::error::{BusError, Result};
 use crate::metadata::{base_attributes, ServiceKind};
 use crate::naming;
+use crate::tick::poll_readable;
 use crate::variant::RtIpc;
 
 type SnapshotService = PortFactory<RtIpc, [StateSample], ()>;
@@ -136,8 +137,16 @@ impl core::fmt::Debug for SnapshotReader {
 }
 
 impl SnapshotReader {
-    /// Opens the snapshot of `subsystem`, which its owner must have created.
+    /// Opens the snapshot of `subsystem`, which its owner must have created, queueing at most
+    /// two snapshots (a controller takes the newest).
     pub fn new(bus: &Bus, subsystem: &str) -> Result<Self> {
+        Self::with_buffer(bus, subsystem, 2)
+    }
+
+    /// [`new`](Self::new) with a queue of `buffer` snapshots (1 to
+    /// [`qos::SNAPSHOT_BUFFER`]), for a reader that takes every one with
+    /// [`receive`](Self::receive).
+    pub fn with_buffer(bus: &Bus, subsystem: &str, buffer: usize) -> Result<Self> {
         naming::validate("subsystem", subsystem)?;
         let name = naming::snapshot(subsystem);
         let Some(details) = bus.details(&name, MessagingPattern::PublishSubscribe)? else {
@@ -158,7 +167,7 @@ impl SnapshotReader {
             .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
         let port = service
             .subscriber_builder()
-            .buffer_size(2)
+            .buffer_size(buffer.clamp(1, qos::SNAPSHOT_BUFFER))
             .create()
             .map_err(|e| BusError::iceoryx("snapshot subscriber", e))?;
         let event = bus.snapshot_event(subsystem)?;
@@ -174,17 +183,22 @@ impl SnapshotReader {
         })
     }
 
+    /// The oldest queued snapshot, without waiting.
+    pub fn receive(&mut self) -> Result<Option<Snapshot>> {
+        self.port
+            .receive()
+            .map(|s| s.map(Snapshot))
+            .map_err(|e| BusError::iceoryx("receiving a snapshot", e))
+    }
+
     /// The newest snapshot queued since the last call, without waiting (older ones are dropped:
     /// a snapshot is a latest value).
     pub fn latest(&mut self) -> Result<Option<Snapshot>> {
         let mut newest = None;
-        loop {
-            match self.port.receive() {
-                Ok(Some(s)) => newest = Some(Snapshot(s)),
-                Ok(None) => return Ok(newest),
-                Err(e) => return Err(BusError::iceoryx("receiving a snapshot", e)),
-            }
+        while let Some(s) = self.receive()? {
+            newest = Some(s);
         }
+        Ok(newest)
     }
 
     /// The newest snapshot, sleeping on the snapshot event until one arrives or `timeout`
@@ -193,9 +207,7 @@ impl SnapshotReader {
         let deadline = Instant::now() + timeout;
         loop {
             // Consume the wake-ups of what is about to be read, so the next wait sleeps.
-            self.listener
-                .try_wait(|_| {})
-                .map_err(|e| BusError::iceoryx("polling the snapshot event", e))?;
+            self.consume()?;
             if let Some(s) = self.latest()? {
                 return Ok(Some(s));
             }
@@ -207,6 +219,25 @@ impl SnapshotReader {
                 .timed_wait(|_| {}, left)
                 .map_err(|e| BusError::iceoryx("waiting for a snapshot", e))?;
         }
+    }
+
+    /// Sleeps until one of `readers` (up to 16) is notified of a snapshot or `timeout` passes,
+    /// and consumes their notifications; then take each one's [`latest`](Self::latest).
+    /// Allocation-free: the way a controller of several subsystems waits.
+    pub fn wait_any(readers: &mut [SnapshotReader], timeout: Duration) -> Result<()> {
+        poll_readable(
+            readers.iter().map(SnapshotReader::raw_fd),
+            timeout,
+            "snapshot readers",
+        )?;
+        readers.iter_mut().try_for_each(SnapshotReader::consume)
+    }
+
+    fn consume(&mut self) -> Result<()> {
+        self.listener
+            .try_wait(|_| {})
+            .map(drop)
+            .map_err(|e| BusError::iceoryx("polling the snapshot event", e))
     }
 
     /// The event listener's file descriptor number, for foreign event loops (epoll, tokio).

@@ -63,34 +63,11 @@ impl TickWaiter {
     /// event sockets: the way a controller of several subsystems waits). Returns, per waiter, the
     /// ticks it consumed (all zero on timeout). Allocation-free for up to 16 waiters.
     pub fn wait_any(waiters: &mut [TickWaiter], timeout: Duration) -> Result<[u64; 16]> {
-        let mut fds = [libc::pollfd {
-            fd: -1,
-            events: 0,
-            revents: 0,
-        }; 16];
-        if waiters.len() > fds.len() {
-            return Err(BusError::Capacity {
-                what: "tick waiters in one wait_any",
-                max: fds.len(),
-            });
-        }
-        for (p, w) in fds.iter_mut().zip(waiters.iter()) {
-            p.fd = w.raw_fd();
-            p.events = libc::POLLIN;
-        }
-        let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
-        // SAFETY: `fds` is a valid array and the count passed does not exceed its length; the
-        // descriptors belong to listeners that outlive the call.
-        let r = unsafe { libc::poll(fds.as_mut_ptr(), waiters.len() as libc::nfds_t, ms) };
-        if r < 0 {
-            let e = nix::errno::Errno::last();
-            if e != nix::errno::Errno::EINTR {
-                return Err(BusError::Os {
-                    context: "waiting for ticks",
-                    source: e,
-                });
-            }
-        }
+        poll_readable(
+            waiters.iter().map(TickWaiter::raw_fd),
+            timeout,
+            "tick waiters",
+        )?;
         let mut ticks = [0u64; 16];
         for (t, w) in ticks.iter_mut().zip(waiters.iter_mut()) {
             *t = w.try_consume()?;
@@ -109,4 +86,43 @@ impl TickWaiter {
         // `self` lives; we only report its number.
         unsafe { self.listener.file_descriptor().native_handle() }
     }
+}
+
+/// Sleeps until one of up to 16 event listeners' descriptors is readable or `timeout` passes:
+/// one `poll(2)`, allocation-free. `what` names them in the capacity error.
+pub(crate) fn poll_readable(
+    fds: impl ExactSizeIterator<Item = i32>,
+    timeout: Duration,
+    what: &'static str,
+) -> Result<()> {
+    let mut polled = [libc::pollfd {
+        fd: -1,
+        events: 0,
+        revents: 0,
+    }; 16];
+    let n = fds.len();
+    if n > polled.len() {
+        return Err(BusError::Capacity {
+            what,
+            max: polled.len(),
+        });
+    }
+    for (p, fd) in polled.iter_mut().zip(fds) {
+        p.fd = fd;
+        p.events = libc::POLLIN;
+    }
+    let ms = timeout.as_millis().min(i32::MAX as u128) as i32;
+    // SAFETY: `polled` is a valid array and the count passed does not exceed its length; the
+    // descriptors belong to listeners that outlive the call.
+    let r = unsafe { libc::poll(polled.as_mut_ptr(), n as libc::nfds_t, ms) };
+    if r < 0 {
+        let e = nix::errno::Errno::last();
+        if e != nix::errno::Errno::EINTR {
+            return Err(BusError::Os {
+                context: "waiting for events",
+                source: e,
+            });
+        }
+    }
+    Ok(())
 }

@@ -15,6 +15,16 @@ use conductor_benches::stress::tool::{main_with_args, ToolContext};
 use conductor_executor::launcher::LaunchOptions;
 
 fn main() -> ExitCode {
+    // A floor's receiving process (`conductor_benches::pingpong::ROLE_ENV` set).
+    if let Some(r) = conductor_benches::pingpong::child_from_env() {
+        return match r {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("conductor-stress: {e}");
+                ExitCode::FAILURE
+            }
+        };
+    }
     let mut args: Vec<OsString> = std::env::args_os().collect();
     // The launcher runs this program as the executor (`conductor-stress executor …`), so the
     // stress test needs no other binary.

@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 
 use conductor_bus::histogram::Histogram;
-use conductor_bus::{monotonic_ns, Bus, StateSample, StateSubscriber, TickWaiter};
+use conductor_bus::{monotonic_ns, Bus, SnapshotReader, StateSample, StateSubscriber, TickWaiter};
 
 /// What the logger measured for one state.
 #[derive(Debug, Clone, Default)]
@@ -134,17 +134,31 @@ impl Summary {
 
 /// The external logger: subscribes to states and accounts for every sample.
 pub struct Logger {
-    subs: Vec<(StateSubscriber, StateReport)>,
+    subs: Vec<(Source, StateReport)>,
     ticks: Vec<TickWaiter>,
+    snapshots: Vec<SnapshotReader>,
     sine: bool,
     window: (u64, u64),
     trace: Vec<(u64, f64)>,
+}
+
+/// Where the logger reads a state.
+enum Source {
+    /// Its own service.
+    State(StateSubscriber),
+    /// Entry `index` of the snapshot of `snapshots[reader]`, with the last `seq` taken.
+    Entry {
+        reader: usize,
+        index: usize,
+        last_seq: Option<u64>,
+    },
 }
 
 impl core::fmt::Debug for Logger {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         f.debug_struct("Logger")
             .field("states", &self.subs.len())
+            .field("snapshots", &self.snapshots.len())
             .finish()
     }
 }
@@ -160,29 +174,75 @@ impl Logger {
         sine: bool,
         buffer: usize,
     ) -> Result<Self, conductor_bus::BusError> {
-        let mut subs = Vec::with_capacity(names.len());
-        let mut ticks = Vec::new();
+        let mut logger = Self::empty(sine);
         let mut subsystems: Vec<String> = Vec::new();
         for n in names {
             let s = StateSubscriber::with_buffer(bus, n, buffer.max(1))?;
             if !subsystems.contains(&s.info().subsystem) {
                 subsystems.push(s.info().subsystem.clone());
-                ticks.push(TickWaiter::new(bus, &s.info().subsystem)?);
+                logger
+                    .ticks
+                    .push(TickWaiter::new(bus, &s.info().subsystem)?);
             }
             let report = StateReport {
                 name: n.clone(),
                 rate_hz: s.info().meta.rate_hz,
                 ..Default::default()
             };
-            subs.push((s, report));
+            logger.subs.push((Source::State(s), report));
         }
-        Ok(Self {
-            subs,
-            ticks,
+        Ok(logger)
+    }
+
+    /// Reads `names` from their subsystems' snapshots instead (one reader per subsystem, up to
+    /// 16, woken by the snapshot events): what a controller of whole subsystems does. Each
+    /// state's samples are those of its own service; one repeated in a snapshot (a slower
+    /// state) is counted once, and a `seq` gap counts as lost.
+    pub fn with_snapshots(
+        bus: &Bus,
+        names: &[String],
+        sine: bool,
+    ) -> Result<Self, conductor_bus::BusError> {
+        let mut logger = Self::empty(sine);
+        let mut subsystems: Vec<String> = Vec::new();
+        for n in names {
+            let info = bus.resolve(n)?;
+            let reader = match subsystems.iter().position(|s| *s == info.subsystem) {
+                Some(r) => r,
+                None => {
+                    logger.snapshots.push(SnapshotReader::with_buffer(
+                        bus,
+                        &info.subsystem,
+                        conductor_bus::qos::SNAPSHOT_BUFFER,
+                    )?);
+                    subsystems.push(info.subsystem.clone());
+                    subsystems.len() - 1
+                }
+            };
+            let report = StateReport {
+                name: n.clone(),
+                rate_hz: info.meta.rate_hz,
+                ..Default::default()
+            };
+            let source = Source::Entry {
+                reader,
+                index: info.meta.index as usize,
+                last_seq: None,
+            };
+            logger.subs.push((source, report));
+        }
+        Ok(logger)
+    }
+
+    fn empty(sine: bool) -> Self {
+        Self {
+            subs: Vec::new(),
+            ticks: Vec::new(),
+            snapshots: Vec::new(),
             sine,
             window: (u64::MAX, u64::MAX),
             trace: Vec::new(),
-        })
+        }
     }
 
     /// Counts the samples whose sample time falls in `[start_ns, end_ns)`. Open the window only
@@ -204,9 +264,12 @@ impl Logger {
         &self.trace
     }
 
-    /// Sleeps until a subsystem's next tick, or `timeout`: waking on the tick events instead of
-    /// polling keeps the measured latency that of the bus, not of a poll interval.
+    /// Sleeps until a subsystem's next tick (or snapshot), or `timeout`: waking on the events
+    /// instead of polling keeps the measured latency that of the bus, not of a poll interval.
     pub fn wait(&mut self, timeout: std::time::Duration) -> Result<(), conductor_bus::BusError> {
+        if !self.snapshots.is_empty() {
+            return SnapshotReader::wait_any(&mut self.snapshots, timeout);
+        }
         match self.ticks.as_mut_slice() {
             [] => {
                 std::thread::sleep(timeout);
@@ -217,22 +280,61 @@ impl Logger {
         }
     }
 
-    /// Drains every subscription once; returns the samples taken.
+    /// Drains every subscription (or takes each subsystem's newest snapshot) once; returns the
+    /// samples taken.
     pub fn poll(&mut self) -> Result<usize, conductor_bus::BusError> {
-        let mut n = 0;
-        for (i, (sub, rep)) in self.subs.iter_mut().enumerate() {
-            while let Some(s) = sub.receive()? {
-                let now = monotonic_ns();
-                let err = account(rep, &s, now, self.sine, self.window);
-                if let Some(e) = err.filter(|_| i == 0) {
-                    if self.trace.len() < self.trace.capacity() {
-                        self.trace.push((now, e));
-                    }
+        let (sine, window) = (self.sine, self.window);
+        let trace = &mut self.trace;
+        let mut keep = |i: usize, now: u64, err: Option<f64>| {
+            if let Some(e) = err.filter(|_| i == 0) {
+                if trace.len() < trace.capacity() {
+                    trace.push((now, e));
                 }
-                n += 1;
             }
-            rep.missed = sub.missed();
-            rep.restarts = sub.restarts();
+        };
+        let mut n = 0;
+        for (i, (source, rep)) in self.subs.iter_mut().enumerate() {
+            if let Source::State(sub) = source {
+                while let Some(s) = sub.receive()? {
+                    let now = monotonic_ns();
+                    keep(i, now, account(rep, &s, now, sine, window));
+                    n += 1;
+                }
+                rep.missed = sub.missed();
+                rep.restarts = sub.restarts();
+            }
+        }
+        // Every queued snapshot, oldest first, with one receive time each: the whole tick is
+        // in hand at once.
+        for (r, reader) in self.snapshots.iter_mut().enumerate() {
+            while let Some(snap) = reader.receive()? {
+                let now = monotonic_ns();
+                for (i, (source, rep)) in self.subs.iter_mut().enumerate() {
+                    let Source::Entry {
+                        reader,
+                        index,
+                        last_seq,
+                    } = source
+                    else {
+                        continue;
+                    };
+                    let Some(s) = snap
+                        .get(*index)
+                        .filter(|s| *reader == r && s.t_sample_ns != 0)
+                    else {
+                        continue;
+                    };
+                    match *last_seq {
+                        Some(l) if s.seq == l => continue,
+                        Some(l) if s.seq < l => rep.restarts += 1,
+                        Some(l) => rep.missed += s.seq - l - 1,
+                        None => {}
+                    }
+                    *last_seq = Some(s.seq);
+                    keep(i, now, account(rep, s, now, sine, window));
+                    n += 1;
+                }
+            }
         }
         Ok(n)
     }

@@ -47,6 +47,9 @@ pub struct StressConfig {
     /// far behind loses samples, and the service's shared memory grows with it (× up to
     /// [`conductor_bus::qos::STATE_SUBSCRIBERS`] subscribers × states).
     pub history: usize,
+    /// The readers take each subsystem's snapshot (one sample per tick, all states, woken by
+    /// the snapshot event) instead of subscribing to every state.
+    pub snapshot: bool,
 }
 
 impl Default for StressConfig {
@@ -61,6 +64,7 @@ impl Default for StressConfig {
             executors: 1,
             subscribers: 1,
             history: 4096,
+            snapshot: false,
         }
     }
 }

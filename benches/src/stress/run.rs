@@ -436,6 +436,9 @@ fn run_manifest(cfg: &StressConfig, opts: &RunOptions, path: &Path) -> Result<Ru
         if logger {
             a.push("--sine".into());
         }
+        if cfg.snapshot {
+            a.push("--snapshot".into());
+        }
         a.extend(
             [
                 "--states",

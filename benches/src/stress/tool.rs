@@ -123,6 +123,10 @@ pub enum Cmd {
         /// real-time CPU is isolated.
         #[arg(long)]
         avoid_cpu: Option<usize>,
+        /// Read each subsystem's snapshot (one sample per tick, all states) instead of
+        /// subscribing to every state.
+        #[arg(long)]
+        snapshot: bool,
     },
     /// Send setpoints to a loopback state and time them (one `probe=...` line).
     Probe {
@@ -180,6 +184,7 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
             go,
             trace,
             avoid_cpu,
+            snapshot,
         } => (
             "log",
             keep_off(avoid_cpu).and_then(|()| {
@@ -191,7 +196,12 @@ pub fn main_with_args(args: impl IntoIterator<Item = OsString>, ctx: ToolContext
                         settle_ms,
                         handshake: ready.zip(go),
                     },
-                    (sine, summary, buffer),
+                    Reading {
+                        sine,
+                        summary,
+                        buffer,
+                        snapshot,
+                    },
                     trace,
                 )
             }),
@@ -331,7 +341,18 @@ fn handshake(
     }
 }
 
-/// `(sine, summary, buffer)`: the sin(t) checks, a summary line, each subscriber's buffer.
+/// How `log` reads and what it prints.
+struct Reading {
+    /// The sin(t) checks.
+    sine: bool,
+    /// A summary line.
+    summary: bool,
+    /// Each subscriber's buffer.
+    buffer: usize,
+    /// Snapshots instead of per-state subscribers.
+    snapshot: bool,
+}
+
 fn log(
     domain: &str,
     states: &[String],
@@ -340,7 +361,12 @@ fn log(
         settle_ms,
         handshake: files,
     }: Window,
-    (sine, summary, buffer): (bool, bool, usize),
+    Reading {
+        sine,
+        summary,
+        buffer,
+        snapshot,
+    }: Reading,
     trace: Option<PathBuf>,
 ) -> Result<(), String> {
     let domain = Domain::new(domain).map_err(|e| e.to_string())?;
@@ -348,7 +374,12 @@ fn log(
     // The states may still be coming up: retry for a while.
     let give_up = Instant::now() + Duration::from_secs(10);
     let mut logger = loop {
-        match Logger::new(&bus, states, sine, buffer) {
+        let opened = if snapshot {
+            Logger::with_snapshots(&bus, states, sine)
+        } else {
+            Logger::new(&bus, states, sine, buffer)
+        };
+        match opened {
             Ok(l) => break l,
             Err(e) if Instant::now() > give_up => return Err(e.to_string()),
             Err(_) => std::thread::sleep(Duration::from_millis(20)),
