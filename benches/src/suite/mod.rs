@@ -50,6 +50,35 @@ pub const STATES: [usize; 2] = [3, 41];
 pub const FULL_SECONDS: f64 = 15.0;
 /// Logged seconds per run in a `--quick` run.
 pub const QUICK_SECONDS: f64 = 3.0;
+/// Longest run of the executor-shaped floor ([`crate::periodic`]) per stress run.
+pub const SHAPE_FLOOR_SECONDS: f64 = 5.0;
+
+/// How the stress test's readers take the states.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reader {
+    /// A subscriber per state, woken by the tick event.
+    States,
+    /// The subsystem's snapshot, woken by the snapshot event.
+    Snapshot,
+}
+
+impl Reader {
+    /// Both, in report order.
+    pub const ALL: [Reader; 2] = [Reader::States, Reader::Snapshot];
+
+    /// `states` or `snapshot`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Reader::States => "states",
+            Reader::Snapshot => "snapshot",
+        }
+    }
+
+    /// The reader called `s`.
+    pub fn parse(s: &str) -> Option<Reader> {
+        Reader::ALL.into_iter().find(|r| r.name() == s)
+    }
+}
 
 /// What to do about cyclictest.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -84,6 +113,10 @@ pub struct Config {
     pub rates_hz: Vec<f64>,
     /// Numbers of sine states.
     pub states: Vec<usize>,
+    /// How the readers take the states: a stress run (and a floor) for each.
+    pub readers: Vec<Reader>,
+    /// Measure the executor-shaped floor beside each stress run.
+    pub shape_floor: bool,
     /// Logged seconds per stress run (and cyclictest's length).
     pub seconds: f64,
     /// CPU of the executor and cyclictest.
@@ -116,6 +149,8 @@ impl Config {
                 FULL_RATES.to_vec()
             },
             states: STATES.to_vec(),
+            readers: Reader::ALL.to_vec(),
+            shape_floor: true,
             seconds: if quick { QUICK_SECONDS } else { FULL_SECONDS },
             // The last CPU: CPU 0 takes most of the machine's housekeeping.
             cpu: cpus - 1,
@@ -152,7 +187,19 @@ impl Config {
         if !(1..=99).contains(&self.priority) {
             return bad(format!("priority must be 1–99, got {}", self.priority));
         }
+        if self.readers.is_empty() {
+            return bad("at least one reader (states, snapshot)".into());
+        }
         Ok(())
+    }
+
+    /// Seconds of each executor-shaped floor run.
+    pub fn shape_floor_seconds(&self) -> f64 {
+        if self.quick {
+            1.0
+        } else {
+            self.seconds.min(SHAPE_FLOOR_SECONDS)
+        }
     }
 }
 
@@ -179,6 +226,16 @@ pub enum SuiteError {
         states: usize,
         /// Why.
         source: RunError,
+    },
+    /// The executor-shaped floor failed.
+    #[error("the executor-shaped floor at {rate_hz} Hz with {states} states: {source}")]
+    ShapeFloor {
+        /// Its rate.
+        rate_hz: f64,
+        /// Its states.
+        states: usize,
+        /// Why.
+        source: PingPongError,
     },
     /// A ping-pong failed.
     #[error("IPC ping-pong {mode}: {source}")]
@@ -266,12 +323,19 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
     std::fs::create_dir_all(&cfg.out).map_err(io(format!("creating {}", cfg.out.display())))?;
     let date = utc_now();
     let mut machine = Machine::now();
-    let runs = cfg.rates_hz.len() * cfg.states.len();
+    let runs = cfg.rates_hz.len() * cfg.states.len() * cfg.readers.len();
     let with_ct = cfg.cyclictest != CyclicChoice::Skip;
+    let floor_s = if cfg.shape_floor {
+        cfg.shape_floor_seconds() + 1.0
+    } else {
+        0.0
+    };
     let weight = IPC_WEIGHT * Mode::ALL.len() as f64
         + cfg.rates_hz.len() as f64 * (if with_ct { cfg.seconds } else { 0.0 } + PLOT_WEIGHT)
-        + runs as f64 * (cfg.seconds + STRESS_OVERHEAD);
-    let steps = (Mode::ALL.len() + runs + if with_ct { cfg.rates_hz.len() } else { 0 }) as u64;
+        + runs as f64 * (cfg.seconds + STRESS_OVERHEAD + floor_s);
+    let steps = (Mode::ALL.len()
+        + runs * (1 + usize::from(cfg.shape_floor))
+        + if with_ct { cfg.rates_hz.len() } else { 0 }) as u64;
     let mut progress = Progress::new(cfg, weight, steps);
 
     let mut cyclictest_note = None;
@@ -329,15 +393,38 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
         let mut dists = Vec::new();
         let mut traces: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
         for &states in &cfg.states {
-            progress.start(&format!("stress test at {rate} Hz, {states} states"));
-            let r = stress_run(cfg, rate, states)?;
-            stress_rows.push(stress_row(&r, ct_row.as_ref(), event_floor.as_ref()));
-            dists.push(Distribution::from_histogram(
-                &format!("executor, {states} states"),
-                &r.lateness,
-            ));
-            traces.push((format!("{rate} Hz, {states} states"), r.trace));
-            progress.done(cfg.seconds + STRESS_OVERHEAD);
+            for &reader in &cfg.readers {
+                let how = reader.name();
+                let shape_floor = if cfg.shape_floor {
+                    progress.start(&format!(
+                        "executor-shaped floor at {rate} Hz, {states} states, {how}"
+                    ));
+                    let f = shape_floor(cfg, rate, states, reader)?;
+                    progress.done(floor_s);
+                    Some(f)
+                } else {
+                    None
+                };
+                progress.start(&format!(
+                    "stress test at {rate} Hz, {states} states, read by {how}"
+                ));
+                let r = stress_run(cfg, rate, states, reader)?;
+                let mut row = stress_row(&r, ct_row.as_ref(), event_floor.as_ref());
+                row.reader = how.into();
+                row.sample_to_subscriber_over_shape_floor = shape_floor
+                    .as_ref()
+                    .map(|f| row.sample_to_subscriber.over(f));
+                row.shape_floor = shape_floor;
+                stress_rows.push(row);
+                dists.push(Distribution::from_histogram(
+                    &format!("executor, {states} states, read by {how}"),
+                    &r.lateness,
+                ));
+                if reader == cfg.readers[0] {
+                    traces.push((format!("{rate} Hz, {states} states"), r.trace));
+                }
+                progress.done(cfg.seconds + STRESS_OVERHEAD);
+            }
         }
         if let Some(r) = &ct {
             dists.push(Distribution::from_us_buckets(
@@ -443,12 +530,44 @@ fn measure_ipc(cfg: &Config, progress: &mut Progress) -> Result<Vec<IpcRow>, Sui
         .collect())
 }
 
-fn stress_run(cfg: &Config, rate_hz: f64, states: usize) -> Result<RunResult, SuiteError> {
+fn stress_run(
+    cfg: &Config,
+    rate_hz: f64,
+    states: usize,
+    reader: Reader,
+) -> Result<RunResult, SuiteError> {
     let sc = StressConfig {
         probe: true,
+        snapshot: reader == Reader::Snapshot,
         ..stress_config(cfg, rate_hz, states)
     };
     run_stress(cfg, &sc, true, None)
+}
+
+/// The executor-shaped floor ([`crate::periodic`]) of a stress run: the same rate, number of
+/// states, reading, CPU, priority and subscriber buffer, without the Conductor layer.
+fn shape_floor(
+    cfg: &Config,
+    rate_hz: f64,
+    states: usize,
+    reader: Reader,
+) -> Result<Quantiles, SuiteError> {
+    let p = crate::periodic::Periodic {
+        rate_hz,
+        states,
+        snapshot: reader == Reader::Snapshot,
+        seconds: cfg.shape_floor_seconds(),
+        cpu: cfg.cpu,
+        priority: cfg.priority,
+        buffer: StressConfig::default().history,
+    };
+    crate::periodic::measure(&p, &cfg.helpers.pingpong_child)
+        .map(|p| Quantiles::from(&p))
+        .map_err(|source| SuiteError::ShapeFloor {
+            rate_hz,
+            states,
+            source,
+        })
 }
 
 /// A stress run of `states` at `rate_hz` on the suite's CPU and priority, sleeping to its
@@ -511,6 +630,13 @@ fn stress_row(r: &RunResult, ct: Option<&CyclicRow>, event_floor: Option<&Quanti
     StressRow {
         rate_hz: r.config.rate_hz,
         states: r.config.states,
+        reader: if r.config.snapshot {
+            Reader::Snapshot
+        } else {
+            Reader::States
+        }
+        .name()
+        .into(),
         rt_active: r.rt_active,
         pinned_cpu: r.pinned_cpu,
         ticks: r.ticks,
@@ -525,6 +651,8 @@ fn stress_row(r: &RunResult, ct: Option<&CyclicRow>, event_floor: Option<&Quanti
         publish_to_subscriber: Quantiles::from_line(&r.summary, "latency", "count")
             .unwrap_or_default(),
         sample_to_subscriber_over_ipc: event_floor.map(|f| s2s.over(f)),
+        shape_floor: None,
+        sample_to_subscriber_over_shape_floor: None,
         command,
         samples: num(&r.summary, "count"),
         lost: num(&r.summary, "missed"),

@@ -13,7 +13,7 @@ use crate::Percentiles;
 
 /// The layout version of `report.json`: 2 added `mode` (`suite` or `scaling`, whose report is
 /// [`super::scaling::ScalingReport`]).
-pub const SCHEMA: u32 = 2;
+pub const SCHEMA: u32 = 3;
 
 /// Nearest-rank percentiles of a latency (ns).
 #[derive(Debug, Clone, Copy, Default, Serialize, PartialEq)]
@@ -148,6 +148,8 @@ pub struct StressRow {
     pub rate_hz: f64,
     /// Sine states (one more, the command probe's, ran beside them).
     pub states: usize,
+    /// How the readers took the states: `states` (a subscriber per state) or `snapshot`.
+    pub reader: String,
     /// The executor ran SCHED_FIFO.
     pub rt_active: bool,
     /// CPU it was pinned to.
@@ -175,6 +177,11 @@ pub struct StressRow {
     pub publish_to_subscriber: Quantiles,
     /// `sample_to_subscriber` over the raw-event IPC floor.
     pub sample_to_subscriber_over_ipc: Option<Ratios>,
+    /// The floor of the same shape: a raw periodic publisher at the executor's rate, CPU and
+    /// priority → a raw event-woken reader of the same states, read the same way.
+    pub shape_floor: Option<Quantiles>,
+    /// `sample_to_subscriber` over `shape_floor`.
+    pub sample_to_subscriber_over_shape_floor: Option<Ratios>,
     /// Controller command → hardware write.
     pub command: Option<CommandRow>,
     /// Samples logged in the window.
@@ -306,7 +313,7 @@ impl Report {
         }
         let _ = writeln!(
             s,
-            "| rate Hz | states | RT | ticks | misses | 1st / 2nd half | p50 | p99 | p99.9 | max | cyclictest p50 | p99 | p99.9 | max | ×p50 | ×p99 | ×p99.9 | ×max |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "| rate Hz | states | reader | RT | ticks | misses | 1st / 2nd half | p50 | p99 | p99.9 | max | cyclictest p50 | p99 | p99.9 | max | ×p50 | ×p99 | ×p99.9 | ×max |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for r in &self.stress {
             let ct = self
@@ -317,9 +324,10 @@ impl Report {
             let x = r.lateness_over_cyclictest.unwrap_or_default();
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {} / {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} / {} | {} | {} | {} | {} | {} | {} |",
                 rate(r.rate_hz),
                 r.states,
+                r.reader,
                 if r.rt_active { "FIFO" } else { "no" },
                 r.ticks,
                 r.misses,
@@ -339,7 +347,11 @@ impl Report {
             s,
             "Sample → subscriber: the sample request's time t_S (when the simulated hardware \
              produced sin(t_S)) → the external logger process reading it, woken by the tick \
-             event; its floor is the raw-event ping-pong. Command → write: the probe process's \
+             event and subscribed to every state (reader `states`), or woken by the snapshot \
+             event and reading the subsystem's snapshot (reader `snapshot`). Its floors: the \
+             raw-event ping-pong, and the floor of the same shape (a raw periodic publisher at \
+             the executor's rate, CPU and priority, woken reader off that CPU, the same states \
+             read the same way; `conductor_benches::periodic`). Command → write: the probe process's \
              send stamp → the wake stamp of the tick that wrote the value to the (loopback) \
              hardware; it includes the wait for the next tick (0–1 period, commands are sent at \
              random phases). Command → reflected: → the first sample showing the value (one \
@@ -347,7 +359,7 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "| rate Hz | states | sample→sub p50 | p99 | p99.9 | max | p50 / IPC floor | cmd→write p50 | p99 | p99.9 | max | cmd→reflected p50 | max | commands |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "| rate Hz | states | reader | sample→sub p50 | p99 | p99.9 | max | p50 / IPC floor | shape floor p50 | p99 | p50 / shape floor | cmd→write p50 | p99 | p99.9 | max | cmd→reflected p50 | max | commands |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for r in &self.stress {
             let (cw, cr, n) = match &r.command {
@@ -364,11 +376,17 @@ impl Report {
             };
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
                 rate(r.rate_hz),
                 r.states,
+                r.reader,
                 q4(&r.sample_to_subscriber),
                 ratio(r.sample_to_subscriber_over_ipc.and_then(|x| x.p50)),
+                r.shape_floor.map_or_else(
+                    || "– | –".to_string(),
+                    |f| format!("{} | {}", fmt_ns(f.p50_ns), fmt_ns(f.p99_ns))
+                ),
+                ratio(r.sample_to_subscriber_over_shape_floor.and_then(|x| x.p50)),
                 cw,
                 cr,
                 n
@@ -388,14 +406,15 @@ impl Report {
         );
         let _ = writeln!(
             s,
-            "| rate Hz | states | samples | lost | late steps per state | executor CPU % | error max | error RMS | pipeline max | thesis (Fig. 3.1, 3 states) |\n|---|---|---|---|---|---|---|---|---|---|"
+            "| rate Hz | states | reader | samples | lost | late steps per state | executor CPU % | error max | error RMS | pipeline max | thesis (Fig. 3.1, 3 states) |\n|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for r in &self.stress {
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {:.1} | {} | {:.2e} | {:.2e} | {:.1e} | {} |",
+                "| {} | {} | {} | {} | {} | {:.1} | {} | {:.2e} | {:.2e} | {:.1e} | {} |",
                 rate(r.rate_hz),
                 r.states,
+                r.reader,
                 r.samples,
                 r.lost,
                 r.late_steps as f64 / r.states.max(1) as f64,

@@ -378,6 +378,7 @@ fn point_run(
         executors,
         subscribers,
         history: HISTORY,
+        snapshot: cfg.readers.first() == Some(&super::Reader::Snapshot),
         ..stress_config(cfg, rate_hz, states)
     };
     // Bring-up opens a service per state: 1 000 states take longer than the default 10 s.

@@ -44,6 +44,9 @@ fn helpers() -> Result<Helpers> {
 /// change the plan.
 pub fn run_scaling(a: &BenchArgs) -> Result<()> {
     let mut cfg = suite::Config::new(a.quick, helpers()?);
+    if !a.readers.is_empty() {
+        cfg.readers = a.readers.clone();
+    }
     let mut plan = scaling::Plan::new(a.quick);
     if let Some(&r) = a.rates.first() {
         plan.rate_hz = r;
@@ -81,6 +84,9 @@ fn wrote(markdown: &str, out: &std::path::Path, plots: usize) {
 /// Runs the suite; prints the Markdown report and where the files are.
 pub fn run(a: &BenchArgs) -> Result<()> {
     let mut cfg = suite::Config::new(a.quick, helpers()?);
+    if !a.readers.is_empty() {
+        cfg.readers = a.readers.clone();
+    }
     if !a.rates.is_empty() {
         cfg.rates_hz = a.rates.clone();
     }

@@ -477,6 +477,11 @@ pub struct BenchArgs {
     /// Numbers of sine states [default: 3,41].
     #[arg(long, value_delimiter = ',', value_name = "N,...")]
     pub states: Vec<usize>,
+    /// How the stress test's readers take the states: `states` (a subscriber per state, woken by
+    /// the tick event), `snapshot` (the subsystem's snapshot, woken by its event) or both
+    /// (default: a run of each). `--scaling` uses the first.
+    #[arg(long, value_delimiter = ',', value_name = "READER,...", value_parser = parse_reader)]
+    pub readers: Vec<conductor_benches::suite::Reader>,
     /// Logged seconds per run [default: 15, the span of Fig. 3.1; --quick: 3].
     #[arg(long, value_name = "S")]
     pub seconds: Option<f64>,
@@ -544,4 +549,9 @@ pub struct LaunchArgs {
     /// Only validate the manifest and exit (status 2 if invalid).
     #[arg(long)]
     pub check: bool,
+}
+
+fn parse_reader(s: &str) -> Result<conductor_benches::suite::Reader, String> {
+    conductor_benches::suite::Reader::parse(s)
+        .ok_or_else(|| format!("{s:?}: expected `states` or `snapshot`"))
 }

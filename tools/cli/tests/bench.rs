@@ -1,5 +1,6 @@
 //! `conductor bench --quick` end to end: it runs the whole suite (IPC ping-pong, cyclictest when
-//! installed, the stress test at every quick rate with 3 and 41 states) and writes a well-formed
+//! installed, the stress test at every quick rate with 3 and 41 states, each read by per-state
+//! subscribers and by the snapshot, beside its executor-shaped floor) and writes a well-formed
 //! report: JSON that parses with every row, PNGs with the right signature and size, and a
 //! Markdown table row per configured rate and state count. The figures themselves are not
 //! checked: they depend on the machine. The executor sleeps to its deadlines (no spin), so the
@@ -9,7 +10,7 @@ use std::collections::BTreeSet;
 use std::path::Path;
 use std::process::Command;
 
-use conductor_benches::suite::{cyclictest, plots, QUICK_RATES, STATES};
+use conductor_benches::suite::{cyclictest, plots, Reader, QUICK_RATES, STATES};
 use serde_json::Value;
 
 /// Width and height from a PNG's IHDR chunk, after checking the signature.
@@ -27,11 +28,11 @@ fn png_size(path: &Path) -> (u32, u32) {
     (be(16), be(20))
 }
 
-/// The first cell of every body row of each Markdown table whose header starts with
-/// `| rate Hz | states |`, with the second cell: one set per table.
-fn table_rows(md: &str) -> Vec<Vec<(String, String)>> {
+/// The first three cells (rate, states, reader) of every body row of each Markdown table whose
+/// header starts with `| rate Hz | states |`: one set per table.
+fn table_rows(md: &str) -> Vec<Vec<(String, String, String)>> {
     let mut tables = Vec::new();
-    let mut current: Option<Vec<(String, String)>> = None;
+    let mut current: Option<Vec<(String, String, String)>> = None;
     for line in md.lines() {
         if line.starts_with("| rate Hz | states |") {
             current = Some(Vec::new());
@@ -41,7 +42,11 @@ fn table_rows(md: &str) -> Vec<Vec<(String, String)>> {
             (Some(_), true) if line.starts_with("|---") => {}
             (Some(rows), true) => {
                 let cells: Vec<&str> = line.split('|').map(str::trim).collect();
-                rows.push((cells[1].to_string(), cells[2].to_string()));
+                rows.push((
+                    cells[1].to_string(),
+                    cells[2].to_string(),
+                    cells[3].to_string(),
+                ));
             }
             (Some(_), false) => tables.push(current.take().unwrap()),
             (None, _) => {}
@@ -78,7 +83,7 @@ fn quick_bench_writes_a_table_json_and_plots() {
     let j: Value = serde_json::from_str(&text).unwrap();
     assert_eq!(
         (j["schema"].as_u64(), j["mode"].as_str()),
-        (Some(2), Some("suite"))
+        (Some(3), Some("suite"))
     );
     assert_eq!(j["quick"], true);
     let rates: Vec<f64> = j["rates_hz"]
@@ -93,13 +98,24 @@ fn quick_bench_writes_a_table_json_and_plots() {
     for r in ipc {
         quantiles_ok(&r["one_way"], r["path"].as_str().unwrap());
     }
+    // A row per rate × state count × reader (a subscriber per state, or the snapshot).
     let stress = j["stress"].as_array().unwrap();
-    assert_eq!(stress.len(), QUICK_RATES.len() * STATES.len());
+    let per_rate = STATES.len() * Reader::ALL.len();
+    assert_eq!(stress.len(), QUICK_RATES.len() * per_rate);
     for (i, row) in stress.iter().enumerate() {
-        let (rate, states) = (QUICK_RATES[i / STATES.len()], STATES[i % STATES.len()]);
+        let rate = QUICK_RATES[i / per_rate];
+        let states = STATES[i % per_rate / Reader::ALL.len()];
+        let reader = Reader::ALL[i % Reader::ALL.len()].name();
         assert_eq!(row["rate_hz"].as_f64(), Some(rate));
         assert_eq!(row["states"].as_u64(), Some(states as u64));
-        let what = format!("{rate} Hz × {states}");
+        assert_eq!(row["reader"].as_str(), Some(reader));
+        let what = format!("{rate} Hz × {states}, read by {reader}");
+        // Beside each run, its floor of the same shape, and the ratio to it.
+        quantiles_ok(&row["shape_floor"], &format!("{what} shape floor"));
+        assert!(
+            row["sample_to_subscriber_over_shape_floor"]["p50"].is_f64(),
+            "{what}: {row}"
+        );
         quantiles_ok(&row["lateness"], &format!("{what} lateness"));
         quantiles_ok(
             &row["sample_to_subscriber"],
@@ -164,9 +180,15 @@ fn quick_bench_writes_a_table_json_and_plots() {
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     let tables = table_rows(&md);
     assert_eq!(tables.len(), 3, "lateness, end to end, thesis:\n{md}");
-    let want: Vec<(String, String)> = QUICK_RATES
+    let want: Vec<(String, String, String)> = QUICK_RATES
         .iter()
-        .flat_map(|r| STATES.iter().map(move |s| (r.to_string(), s.to_string())))
+        .flat_map(|r| {
+            STATES.iter().flat_map(move |s| {
+                Reader::ALL
+                    .iter()
+                    .map(move |x| (r.to_string(), s.to_string(), x.name().to_string()))
+            })
+        })
         .collect();
     for t in &tables {
         assert_eq!(t, &want, "{md}");

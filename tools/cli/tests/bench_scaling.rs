@@ -67,7 +67,7 @@ fn quick_scaling_writes_points_fits_and_curves() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(
         (j["schema"].as_u64(), j["mode"].as_str()),
-        (Some(2), Some("scaling"))
+        (Some(3), Some("scaling"))
     );
     assert_eq!(j["quick"], true);
 
