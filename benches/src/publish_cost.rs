@@ -38,11 +38,19 @@ pub enum Path {
     State,
     /// `StatePublisher::publish` (a clock read per state), and `notify_tick`.
     StateClockPerState,
+    /// What the executor does: `StatePublisher::stage_at` every state with one clock read per
+    /// tick, `flush_states` (the subsystem's snapshot, then every state), and `notify_tick`.
+    Staged,
 }
 
 impl Path {
     /// Every path, the floor first.
-    pub const ALL: [Path; 3] = [Path::Raw, Path::State, Path::StateClockPerState];
+    pub const ALL: [Path; 4] = [
+        Path::Raw,
+        Path::State,
+        Path::StateClockPerState,
+        Path::Staged,
+    ];
 
     /// `raw`, `state` or `state-clock-per-state`.
     pub fn name(self) -> &'static str {
@@ -50,6 +58,7 @@ impl Path {
             Path::Raw => "raw",
             Path::State => "state",
             Path::StateClockPerState => "state-clock-per-state",
+            Path::Staged => "staged",
         }
     }
 }
@@ -211,6 +220,19 @@ impl PublishRig {
             Path::StateClockPerState => {
                 for i in 0..self.states {
                     self.state.publish(i, self.seq, self.seq, v, 0)?;
+                }
+                if notify {
+                    self.state.notify_tick()?;
+                }
+            }
+            Path::Staged => {
+                let t = monotonic_ns();
+                for i in 0..self.states {
+                    self.state.stage_at(i, self.seq, self.seq, v, 0, t)?;
+                }
+                let sent = self.state.flush_states();
+                if sent.errors > 0 {
+                    return Err(iox("flush")(format!("{} sends failed", sent.errors)));
                 }
                 if notify {
                     self.state.notify_tick()?;

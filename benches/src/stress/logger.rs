@@ -145,7 +145,7 @@ pub struct Logger {
 /// Where the logger reads a state.
 enum Source {
     /// Its own service.
-    State(StateSubscriber),
+    State(Box<StateSubscriber>),
     /// Entry `index` of the snapshot of `snapshots[reader]`, with the last `seq` taken.
     Entry {
         reader: usize,
@@ -189,7 +189,7 @@ impl Logger {
                 rate_hz: s.info().meta.rate_hz,
                 ..Default::default()
             };
-            logger.subs.push((Source::State(s), report));
+            logger.subs.push((Source::State(Box::new(s)), report));
         }
         Ok(logger)
     }

@@ -38,7 +38,9 @@ use crate::pingpong::{self, Mode, PingPongError};
 use cyclictest::{CyclicConfig, CyclicResult};
 use machine::{load_average, utc_now, Machine};
 use plots::{Curve, Distribution, PlotError};
-use report::{CommandRow, CyclicRow, IpcRow, Quantiles, Report, StressRow};
+use report::{
+    CommandRow, CyclicRow, IpcRow, PerStateCostRow, PublishCostRow, Quantiles, Report, StressRow,
+};
 
 /// The rates of a full run (Hz): the thesis' 50 Hz – 10 kHz.
 pub const FULL_RATES: [f64; 6] = [50.0, 100.0, 500.0, 1000.0, 5000.0, 10_000.0];
@@ -330,10 +332,11 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
     } else {
         0.0
     };
-    let weight = IPC_WEIGHT * Mode::ALL.len() as f64
+    let weight = IPC_WEIGHT * (Mode::ALL.len() + 1) as f64
         + cfg.rates_hz.len() as f64 * (if with_ct { cfg.seconds } else { 0.0 } + PLOT_WEIGHT)
         + runs as f64 * (cfg.seconds + STRESS_OVERHEAD + floor_s);
     let steps = (Mode::ALL.len()
+        + 1
         + runs * (1 + usize::from(cfg.shape_floor))
         + if with_ct { cfg.rates_hz.len() } else { 0 }) as u64;
     let mut progress = Progress::new(cfg, weight, steps);
@@ -355,6 +358,9 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
     };
 
     let ipc = measure_ipc(cfg, &mut progress)?;
+    progress.start("publish cost (raw iceoryx2 publish, the per-state cost's denominator)");
+    let publish_cost = measure_publish_cost(cfg)?;
+    progress.done(IPC_WEIGHT);
     let event_floor = ipc
         .iter()
         .find(|r| r.path == Mode::RawEvent.name())
@@ -483,6 +489,8 @@ pub fn run(cfg: &Config) -> Result<Report, SuiteError> {
         ipc,
         cyclictest: cyclic_rows,
         cyclictest_note,
+        per_state_cost: per_state_cost(&stress_rows, &publish_cost),
+        publish_cost,
         stress: stress_rows,
         plots: plots_written,
     };
@@ -528,6 +536,82 @@ fn measure_ipc(cfg: &Config, progress: &mut Progress) -> Result<Vec<IpcRow>, Sui
             }
         })
         .collect())
+}
+
+/// The publish paths' cost per state for the largest state count, one subscriber per state
+/// (as the stress test's logger), in this run.
+fn measure_publish_cost(cfg: &Config) -> Result<Vec<PublishCostRow>, SuiteError> {
+    let states = cfg.states.iter().copied().max().unwrap_or(1);
+    let ticks = if cfg.quick { 500 } else { 2_000 };
+    let costs = crate::publish_cost::measure(states, 1, ticks, 7).map_err(|source| {
+        SuiteError::PingPong {
+            mode: "publish cost",
+            source,
+        }
+    })?;
+    Ok(costs
+        .iter()
+        .map(|c| PublishCostRow {
+            path: c.path.name().into(),
+            states,
+            per_state_ns: c.per_state_ns,
+            per_tick_ns: c.per_tick_ns,
+        })
+        .collect())
+}
+
+/// The executor's CPU per state per tick (the slope between the smallest and the largest state
+/// count of a rate and reader) beside a raw publish of one state, measured in the same run.
+fn per_state_cost(rows: &[StressRow], publish: &[PublishCostRow]) -> Vec<PerStateCostRow> {
+    let per = |path: crate::publish_cost::Path| {
+        publish
+            .iter()
+            .find(|p| p.path == path.name())
+            .map(|p| p.per_state_ns)
+    };
+    let (Some(raw), Some(staged)) = (
+        per(crate::publish_cost::Path::Raw),
+        per(crate::publish_cost::Path::Staged),
+    ) else {
+        return Vec::new();
+    };
+    let cpu_ns_per_tick = |r: &StressRow| {
+        r.cpu_percent
+            .filter(|_| r.achieved_hz > 0.0)
+            .map(|c| c / 100.0 * 1e9 / r.achieved_hz)
+    };
+    let mut out = Vec::new();
+    for (i, lo) in rows.iter().enumerate() {
+        // Each (rate, reader) once, from its smallest state count to its largest.
+        let same = |r: &&StressRow| r.rate_hz == lo.rate_hz && r.reader == lo.reader;
+        if rows[..i].iter().any(|r| same(&r)) {
+            continue;
+        }
+        let group: Vec<&StressRow> = rows.iter().filter(same).collect();
+        let (Some(a), Some(b)) = (
+            group.iter().min_by_key(|r| r.states),
+            group.iter().max_by_key(|r| r.states),
+        ) else {
+            continue;
+        };
+        let (Some(ca), Some(cb)) = (cpu_ns_per_tick(a), cpu_ns_per_tick(b)) else {
+            continue;
+        };
+        if b.states == a.states {
+            continue;
+        }
+        let executor_ns = (cb - ca) / (b.states - a.states) as f64;
+        out.push(PerStateCostRow {
+            rate_hz: lo.rate_hz,
+            reader: lo.reader.clone(),
+            states: (a.states, b.states),
+            executor_ns_per_state: executor_ns,
+            raw_publish_ns: raw,
+            staged_publish_ns: staged,
+            over_raw: executor_ns / raw,
+        });
+    }
+    out
 }
 
 fn stress_run(

@@ -199,6 +199,38 @@ pub struct StressRow {
     pub pipeline_error_max: f64,
 }
 
+/// The cost of one publish path ([`crate::publish_cost`]), one process, one subscriber per state.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PublishCostRow {
+    /// `raw`, `state`, `state-clock-per-state`, `staged`.
+    pub path: String,
+    /// States published per tick.
+    pub states: usize,
+    /// Median ns per state (no tick event).
+    pub per_state_ns: f64,
+    /// Median ns per tick of every state and the tick event.
+    pub per_tick_ns: f64,
+}
+
+/// The executor's CPU cost per state per tick, beside a raw publish of one state.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PerStateCostRow {
+    /// Rate (Hz).
+    pub rate_hz: f64,
+    /// The stress runs' reader.
+    pub reader: String,
+    /// The two state counts whose CPU per tick the slope joins.
+    pub states: (usize, usize),
+    /// Executor CPU ns per tick per state (the slope).
+    pub executor_ns_per_state: f64,
+    /// A raw iceoryx2 publish of one state (loan, write, send), ns.
+    pub raw_publish_ns: f64,
+    /// The executor's own publish path per state (stage, snapshot, send), ns.
+    pub staged_publish_ns: f64,
+    /// `executor_ns_per_state / raw_publish_ns`.
+    pub over_raw: f64,
+}
+
 /// Everything one suite run measured.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Report {
@@ -230,6 +262,10 @@ pub struct Report {
     pub cyclictest: Vec<CyclicRow>,
     /// Why cyclictest did not run, if it did not.
     pub cyclictest_note: Option<String>,
+    /// What a publish costs per state, every path, in this run.
+    pub publish_cost: Vec<PublishCostRow>,
+    /// The executor's CPU per state beside a raw publish, per rate and reader.
+    pub per_state_cost: Vec<PerStateCostRow>,
     /// The stress runs.
     pub stress: Vec<StressRow>,
     /// Image files written (names relative to the output directory).
@@ -304,6 +340,7 @@ impl Report {
             );
         }
 
+        per_state_section(&mut s, &self.publish_cost, &self.per_state_cost);
         let _ = writeln!(
             s,
             "\n## Tick lateness beside the kernel's wake-up floor (cyclictest)\n"
@@ -428,6 +465,56 @@ impl Report {
         }
         plots_section(&mut s, &self.plots);
         s
+    }
+}
+
+/// The publish paths' cost and the executor's per-state cost beside it.
+fn per_state_section(s: &mut String, publish: &[PublishCostRow], per_state: &[PerStateCostRow]) {
+    if publish.is_empty() {
+        return;
+    }
+    let _ = writeln!(s, "\n## Per-state cost beside a raw publish\n");
+    let _ = writeln!(
+        s,
+        "One process publishing {} states with one subscriber each (median of 7 rounds; \
+         `conductor_benches::publish_cost`): `raw` is iceoryx2 loan + write + send with the \
+         states' settings, `staged` the executor's path (stage every state, the snapshot, \
+         then each state). The executor's cost per state is the slope of its CPU per tick \
+         between the stress runs' smallest and largest state counts (all of its per-state \
+         work: stages, publish, stats).\n",
+        publish[0].states
+    );
+    let _ = writeln!(
+        s,
+        "| path | ns per state | ns per tick (with the tick event) |\n|---|---|---|"
+    );
+    for p in publish {
+        let _ = writeln!(
+            s,
+            "| {} | {:.0} | {:.0} |",
+            p.path, p.per_state_ns, p.per_tick_ns
+        );
+    }
+    if per_state.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "\n| rate Hz | reader | states | executor ns per state per tick | raw publish ns | × raw | staged publish ns |\n|---|---|---|---|---|---|---|"
+    );
+    for r in per_state {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} → {} | {:.0} | {:.0} | {:.2} | {:.0} |",
+            rate(r.rate_hz),
+            r.reader,
+            r.states.0,
+            r.states.1,
+            r.executor_ns_per_state,
+            r.raw_publish_ns,
+            r.over_raw,
+            r.staged_publish_ns
+        );
     }
 }
 

@@ -98,6 +98,31 @@ fn quick_bench_writes_a_table_json_and_plots() {
     for r in ipc {
         quantiles_ok(&r["one_way"], r["path"].as_str().unwrap());
     }
+    // The publish paths' cost in this run, and the executor's per-state cost beside it per rate
+    // and reader.
+    let publish = j["publish_cost"].as_array().unwrap();
+    let paths: Vec<&str> = publish
+        .iter()
+        .map(|p| p["path"].as_str().unwrap())
+        .collect();
+    assert_eq!(paths, ["raw", "state", "state-clock-per-state", "staged"]);
+    for p in publish {
+        assert!(p["per_state_ns"].as_f64().unwrap() > 0.0, "{p}");
+    }
+    let per_state = j["per_state_cost"].as_array().unwrap();
+    assert_eq!(
+        per_state.len(),
+        QUICK_RATES.len() * Reader::ALL.len(),
+        "{per_state:?}"
+    );
+    for r in per_state {
+        assert_eq!(
+            r["states"],
+            serde_json::json!([STATES[0], STATES[1]]),
+            "{r}"
+        );
+        assert!(r["over_raw"].is_f64(), "{r}");
+    }
     // A row per rate × state count × reader (a subscriber per state, or the snapshot).
     let stress = j["stress"].as_array().unwrap();
     let per_rate = STATES.len() * Reader::ALL.len();
