@@ -142,6 +142,36 @@ def test_tick_waiter_wakes_after_the_ticks_samples_and_counts_missed_ticks(leg):
         conductor.TickWaiter("arm", leg.domain)
 
 
+def test_the_snapshot_carries_every_state_of_one_tick(leg):
+    infos = sorted(conductor.states(leg.domain), key=lambda s: s.index)
+    snap = conductor.SnapshotReader(LEG, leg.domain)
+    taken = [snap.wait(1.0) for _ in range(20)]
+    assert all(t is not None and len(t) == len(infos) for t in taken), taken
+    ticks = [max(e.tick for e in t) for t in taken]
+    assert ticks == sorted(set(ticks)), f"each wake-up a newer tick: {ticks}"
+    # The leg's states are all simulated: every entry that has been published says so.
+    for t in taken:
+        for e in t:
+            assert e.t_sample_ns == 0 or e.status & Status.SIMULATED, e
+    # Entry i is the sample that the state of index i has on its own service: subscribe to
+    # every state, take snapshots, and find each entry in that state's history.
+    states = [conductor.State(i.qualified_name, leg.domain, history=4096) for i in infos]
+    snap.latest()
+    later = [snap.wait(1.0) for _ in range(20)]
+    time.sleep(0.05)
+    for st in states:
+        st.update()
+    for t in later:
+        for i, e in enumerate(t):
+            if e.t_sample_ns == 0:
+                continue
+            h = states[i].history()
+            seen = h[(h["t_sample_ns"] == e.t_sample_ns) & (h["seq"] == e.seq)]
+            assert len(seen) == 1 and seen["value"][0] == e.value, (infos[i].name, e)
+    with pytest.raises(conductor.UnknownSubsystem):
+        conductor.SnapshotReader("arm", leg.domain)
+
+
 def test_stats_carry_the_executors_health(leg):
     stats = conductor.Stats(LEG, leg.domain)
     a = stats.wait()

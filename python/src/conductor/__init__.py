@@ -5,6 +5,7 @@
 * :class:`Commander` — setpoints in command frames; ``set``/``send`` return the executor's
   verdict (:class:`Verdict` ``OK``, ``CLAMPED``, ``REJECTED``).
 * :class:`TickWaiter` — sleep until a subsystem's next tick.
+* :class:`SnapshotReader` — every state of a subsystem's tick in one sample.
 * :class:`Stats` — an executor's health (:class:`ExecutorStats`).
 * :mod:`conductor.abi` — every payload of the bus as ``ctypes`` types (``bus/ABI.md``).
 
@@ -43,6 +44,7 @@ from .errors import (
 )
 from .state import SAMPLE_DTYPE, State
 from .stats import Stats, histogram, lateness_quantile
+from .snapshot import SnapshotReader
 from .tick import TICK_EVENT_ID, TickWaiter
 
 __version__ = "0.1.0"
@@ -72,6 +74,7 @@ __all__ = [
     "Stats",
     "Status",
     "TickWaiter",
+    "SnapshotReader",
     "Timeout",
     "UnknownState",
     "UnknownSubsystem",
