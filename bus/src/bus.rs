@@ -236,6 +236,45 @@ impl Bus {
         Ok(())
     }
 
+    /// The static details of `subsystem`'s existing service `name`, checked to be a Conductor
+    /// pub/sub service of `kind` carrying `T` (`UnknownSubsystem` when there is none).
+    pub(crate) fn conductor_details<T: Payload + ?Sized>(
+        &self,
+        subsystem: &str,
+        name: &str,
+        kind: ServiceKind,
+    ) -> Result<ServiceDetails<RtIpc>> {
+        let Some(details) = self.details(name, MessagingPattern::PublishSubscribe)? else {
+            return Err(BusError::UnknownSubsystem {
+                name: subsystem.into(),
+                domain: self.domain().name().into(),
+                service: name.into(),
+            });
+        };
+        self.check_conductor_service(name, &details, kind, T::conductor_type_name())?;
+        Ok(details)
+    }
+
+    /// Opens `subsystem`'s existing Conductor pub/sub service `name` of `kind` carrying `T`,
+    /// after the checks of [`conductor_details`](Self::conductor_details).
+    pub(crate) fn open_conductor_pubsub<T>(
+        &self,
+        subsystem: &str,
+        name: &str,
+        kind: ServiceKind,
+    ) -> Result<publish_subscribe::PortFactory<RtIpc, T, ()>>
+    where
+        T: core::fmt::Debug + iceoryx2::prelude::IceoryxSend + Payload + ?Sized + 'static,
+        iceoryx2::service::builder::publish_subscribe::Builder<T, (), RtIpc>: CreateOrOpen<T>,
+    {
+        self.conductor_details::<T>(subsystem, name, kind)?;
+        self.node()
+            .service_builder(&Self::service_name(name)?)
+            .publish_subscribe::<T>()
+            .open_with(&AttributeVerifier::new())
+            .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))
+    }
+
     /// Creates `name` with `attrs`, or opens it if a (restarted) owner finds it still held open
     /// by clients; opening then requires the same attributes. The service a killed owner left
     /// can vanish between the two (the dead node's resources are cleaned up meanwhile, by this
@@ -329,6 +368,26 @@ pub(crate) trait CreateOrOpen<T: core::fmt::Debug + iceoryx2::prelude::IceoryxSe
     >;
 }
 
+/// A Conductor payload as its service declares it: `T`, or a slice of `T` (the snapshot).
+pub(crate) trait Payload {
+    /// The iceoryx2 type name its service carries (a slice's is its element's).
+    fn conductor_type_name() -> &'static str;
+}
+
+impl<T: iceoryx2::prelude::ZeroCopySend> Payload for T {
+    fn conductor_type_name() -> &'static str {
+        // SAFETY: type_name() has no preconditions; it is unsafe only for implementors.
+        unsafe { <T as iceoryx2::prelude::ZeroCopySend>::type_name() }
+    }
+}
+
+impl<T: iceoryx2::prelude::ZeroCopySend> Payload for [T] {
+    fn conductor_type_name() -> &'static str {
+        // SAFETY: as above.
+        unsafe { <T as iceoryx2::prelude::ZeroCopySend>::type_name() }
+    }
+}
+
 macro_rules! create_or_open {
     ($(<$t:ident> $payload:ty),*) => {$(
         impl<$t> CreateOrOpen<$payload>
@@ -358,6 +417,28 @@ macro_rules! create_or_open {
     )*};
 }
 create_or_open!(<T> T, <T> [T]);
+
+/// A notifier of `event`; `what` names it in the error.
+pub(crate) fn notifier(
+    event: &EventService,
+    what: &'static str,
+) -> Result<iceoryx2::port::notifier::Notifier<RtIpc>> {
+    event
+        .notifier_builder()
+        .create()
+        .map_err(|e| BusError::iceoryx(what, e))
+}
+
+/// A listener of `event`; `what` names it in the error.
+pub(crate) fn listener(
+    event: &EventService,
+    what: &'static str,
+) -> Result<iceoryx2::port::listener::Listener<RtIpc>> {
+    event
+        .listener_builder()
+        .create()
+        .map_err(|e| BusError::iceoryx(what, e))
+}
 
 /// An attribute verifier that requires every key/value of `spec`.
 fn verifier(spec: &AttributeSpecifier) -> Result<AttributeVerifier> {

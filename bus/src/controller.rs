@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 
 use iceoryx2::port::publisher::Publisher;
-use iceoryx2::prelude::{MessagingPattern, ZeroCopySend};
+
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use crate::abi::{CommandFrame, MAX_SETPOINTS};
@@ -219,22 +219,8 @@ impl Controller {
 
 fn open_outbox(bus: &Bus, subsystem: &str) -> Result<Outbox> {
     let name = naming::commands(subsystem);
-    let Some(details) = bus.details(&name, MessagingPattern::PublishSubscribe)? else {
-        return Err(BusError::UnknownSubsystem {
-            name: subsystem.into(),
-            domain: bus.domain().name().into(),
-            service: name,
-        });
-    };
-    // SAFETY: type_name() has no preconditions.
-    let tn = unsafe { CommandFrame::type_name() };
-    bus.check_conductor_service(&name, &details, ServiceKind::Commands, tn)?;
-    let service = bus
-        .node()
-        .service_builder(&Bus::service_name(&name)?)
-        .publish_subscribe::<CommandFrame>()
-        .open()
-        .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
+    let service =
+        bus.open_conductor_pubsub::<CommandFrame>(subsystem, &name, ServiceKind::Commands)?;
     let port = service
         .publisher_builder()
         .create()

@@ -104,16 +104,8 @@ impl Bus {
     pub fn command_watchdog(&self, subsystem: &str) -> Result<Option<Option<Duration>>> {
         naming::validate("subsystem", subsystem)?;
         let name = naming::commands(subsystem);
-        let Some(details) = self.details(&name, MessagingPattern::PublishSubscribe)? else {
-            return Err(BusError::UnknownSubsystem {
-                name: subsystem.into(),
-                domain: self.domain().name().into(),
-                service: name,
-            });
-        };
-        // SAFETY: type_name() has no preconditions; it is unsafe only for implementors.
-        let tn = unsafe { <CommandFrame as iceoryx2::prelude::ZeroCopySend>::type_name() };
-        self.check_conductor_service(&name, &details, ServiceKind::Commands, tn)?;
+        let details =
+            self.conductor_details::<CommandFrame>(subsystem, &name, ServiceKind::Commands)?;
         Ok(metadata::watchdog_from_attributes(
             details.static_details.attributes(),
         ))

@@ -13,7 +13,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{AttributeSpecifier, PortFactory as _};
 
 use crate::abi::{CommandFrame, ExecutorStats, StateSample};
-use crate::bus::{qos, Bus, EventService, StateService};
+use crate::bus::{notifier, qos, Bus, EventService, StateService};
 use crate::clock::monotonic_ns;
 use crate::error::{BusError, Result};
 use crate::metadata::{
@@ -128,10 +128,7 @@ impl StatePublisher {
         }
         let snapshot = SnapshotWriter::create(bus, subsystem, ports.len())?;
         let tick = bus.tick_event(subsystem)?;
-        let notifier = tick
-            .notifier_builder()
-            .create()
-            .map_err(|e| BusError::iceoryx("tick notifier", e))?;
+        let notifier = notifier(&tick, "tick notifier")?;
         let n = ports.len();
         Ok(Self {
             subsystem: subsystem.into(),

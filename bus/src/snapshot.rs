@@ -15,12 +15,12 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{FileDescriptorBased, MessagingPattern, ZeroCopySend};
+use iceoryx2::prelude::FileDescriptorBased;
 use iceoryx2::sample::Sample;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use crate::abi::{status, StateSample};
-use crate::bus::{qos, Bus, EventService};
+use crate::bus::{listener, notifier, qos, Bus, EventService};
 use crate::error::{BusError, Result};
 use crate::metadata::{base_attributes, ServiceKind};
 use crate::naming;
@@ -63,10 +63,7 @@ impl SnapshotWriter {
             .create()
             .map_err(|e| BusError::iceoryx(format!("publisher for {name:?}"), e))?;
         let event = bus.snapshot_event(subsystem)?;
-        let notifier = event
-            .notifier_builder()
-            .create()
-            .map_err(|e| BusError::iceoryx("snapshot notifier", e))?;
+        let notifier = notifier(&event, "snapshot notifier")?;
         Ok(Self {
             port,
             notifier,
@@ -149,32 +146,15 @@ impl SnapshotReader {
     pub fn with_buffer(bus: &Bus, subsystem: &str, buffer: usize) -> Result<Self> {
         naming::validate("subsystem", subsystem)?;
         let name = naming::snapshot(subsystem);
-        let Some(details) = bus.details(&name, MessagingPattern::PublishSubscribe)? else {
-            return Err(BusError::UnknownSubsystem {
-                name: subsystem.into(),
-                domain: bus.domain().name().into(),
-                service: name,
-            });
-        };
-        // SAFETY: type_name() has no preconditions.
-        let tn = unsafe { StateSample::type_name() };
-        bus.check_conductor_service(&name, &details, ServiceKind::Snapshot, tn)?;
-        let service = bus
-            .node()
-            .service_builder(&Bus::service_name(&name)?)
-            .publish_subscribe::<[StateSample]>()
-            .open()
-            .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
+        let service =
+            bus.open_conductor_pubsub::<[StateSample]>(subsystem, &name, ServiceKind::Snapshot)?;
         let port = service
             .subscriber_builder()
             .buffer_size(buffer.clamp(1, qos::SNAPSHOT_BUFFER))
             .create()
             .map_err(|e| BusError::iceoryx("snapshot subscriber", e))?;
         let event = bus.snapshot_event(subsystem)?;
-        let listener = event
-            .listener_builder()
-            .create()
-            .map_err(|e| BusError::iceoryx("snapshot listener", e))?;
+        let listener = listener(&event, "snapshot listener")?;
         Ok(Self {
             port,
             listener,

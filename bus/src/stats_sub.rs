@@ -1,7 +1,7 @@
 //! Reading an executor's health from `conductor/<subsystem>/stats`.
 
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{MessagingPattern, ZeroCopySend};
+
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory;
 
 use crate::abi::ExecutorStats;
@@ -29,22 +29,8 @@ impl StatsSubscriber {
     pub fn new(bus: &Bus, subsystem: &str) -> Result<Self> {
         naming::validate("subsystem", subsystem)?;
         let name = naming::stats(subsystem);
-        let Some(details) = bus.details(&name, MessagingPattern::PublishSubscribe)? else {
-            return Err(BusError::UnknownSubsystem {
-                name: subsystem.into(),
-                domain: bus.domain().name().into(),
-                service: name,
-            });
-        };
-        // SAFETY: type_name() has no preconditions.
-        let tn = unsafe { ExecutorStats::type_name() };
-        bus.check_conductor_service(&name, &details, ServiceKind::Stats, tn)?;
-        let service = bus
-            .node()
-            .service_builder(&Bus::service_name(&name)?)
-            .publish_subscribe::<ExecutorStats>()
-            .open()
-            .map_err(|e| BusError::iceoryx(format!("opening {name:?}"), e))?;
+        let service =
+            bus.open_conductor_pubsub::<ExecutorStats>(subsystem, &name, ServiceKind::Stats)?;
         let port = service
             .subscriber_builder()
             .create()

@@ -4,7 +4,7 @@ use core::time::Duration;
 
 use iceoryx2::prelude::FileDescriptorBased;
 
-use crate::bus::{Bus, EventService};
+use crate::bus::{listener, Bus, EventService};
 use crate::error::{BusError, Result};
 use crate::naming;
 use crate::owner::TickListener;
@@ -30,10 +30,7 @@ impl TickWaiter {
     pub fn new(bus: &Bus, subsystem: &str) -> Result<Self> {
         naming::validate("subsystem", subsystem)?;
         let service = bus.tick_event(subsystem)?;
-        let listener = service
-            .listener_builder()
-            .create()
-            .map_err(|e| BusError::iceoryx("tick listener", e))?;
+        let listener = listener(&service, "tick listener")?;
         Ok(Self {
             listener,
             _service: service,
