@@ -538,42 +538,42 @@ fn measure_ipc(cfg: &Config, progress: &mut Progress) -> Result<Vec<IpcRow>, Sui
         .collect())
 }
 
-/// The publish paths' cost per state for the largest state count, one subscriber per state
-/// (as the stress test's logger), in this run.
+/// The publish paths' cost per state for the largest state count, with one subscriber per
+/// state (as a per-state reader) and with none (as when the readers take the snapshot), in
+/// this run.
 fn measure_publish_cost(cfg: &Config) -> Result<Vec<PublishCostRow>, SuiteError> {
     let states = cfg.states.iter().copied().max().unwrap_or(1);
     let ticks = if cfg.quick { 500 } else { 2_000 };
-    let costs = crate::publish_cost::measure(states, 1, ticks, 7).map_err(|source| {
-        SuiteError::PingPong {
-            mode: "publish cost",
-            source,
-        }
-    })?;
-    Ok(costs
-        .iter()
-        .map(|c| PublishCostRow {
+    let mut rows = Vec::new();
+    for subscribers in [1, 0] {
+        let costs =
+            crate::publish_cost::measure(states, subscribers, ticks, 7).map_err(|source| {
+                SuiteError::PingPong {
+                    mode: "publish cost",
+                    source,
+                }
+            })?;
+        rows.extend(costs.iter().map(|c| PublishCostRow {
             path: c.path.name().into(),
             states,
+            subscribers,
             per_state_ns: c.per_state_ns,
             per_tick_ns: c.per_tick_ns,
-        })
-        .collect())
+        }));
+    }
+    Ok(rows)
 }
 
 /// The executor's CPU per state per tick (the slope between the smallest and the largest state
 /// count of a rate and reader) beside a raw publish of one state, measured in the same run.
 fn per_state_cost(rows: &[StressRow], publish: &[PublishCostRow]) -> Vec<PerStateCostRow> {
-    let per = |path: crate::publish_cost::Path| {
+    // A per-state reader subscribes to every state; a snapshot reader to none of them.
+    let per = |path: crate::publish_cost::Path, reader: &str| {
+        let subscribers = usize::from(reader == Reader::States.name());
         publish
             .iter()
-            .find(|p| p.path == path.name())
+            .find(|p| p.path == path.name() && p.subscribers == subscribers)
             .map(|p| p.per_state_ns)
-    };
-    let (Some(raw), Some(staged)) = (
-        per(crate::publish_cost::Path::Raw),
-        per(crate::publish_cost::Path::Staged),
-    ) else {
-        return Vec::new();
     };
     let cpu_ns_per_tick = |r: &StressRow| {
         r.cpu_percent
@@ -601,6 +601,12 @@ fn per_state_cost(rows: &[StressRow], publish: &[PublishCostRow]) -> Vec<PerStat
             continue;
         }
         let executor_ns = (cb - ca) / (b.states - a.states) as f64;
+        let (Some(raw), Some(staged)) = (
+            per(crate::publish_cost::Path::Raw, &lo.reader),
+            per(crate::publish_cost::Path::Staged, &lo.reader),
+        ) else {
+            continue;
+        };
         out.push(PerStateCostRow {
             rate_hz: lo.rate_hz,
             reader: lo.reader.clone(),

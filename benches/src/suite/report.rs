@@ -206,6 +206,8 @@ pub struct PublishCostRow {
     pub path: String,
     /// States published per tick.
     pub states: usize,
+    /// Subscribers per state.
+    pub subscribers: usize,
     /// Median ns per state (no tick event).
     pub per_state_ns: f64,
     /// Median ns per tick of every state and the tick event.
@@ -223,7 +225,8 @@ pub struct PerStateCostRow {
     pub states: (usize, usize),
     /// Executor CPU ns per tick per state (the slope).
     pub executor_ns_per_state: f64,
-    /// A raw iceoryx2 publish of one state (loan, write, send), ns.
+    /// A raw iceoryx2 publish of one state (loan, write, send) with as many subscribers per
+    /// state as the reader brings (1 for `states`, 0 for `snapshot`), ns.
     pub raw_publish_ns: f64,
     /// The executor's own publish path per state (stage, snapshot, send), ns.
     pub staged_publish_ns: f64,
@@ -476,23 +479,24 @@ fn per_state_section(s: &mut String, publish: &[PublishCostRow], per_state: &[Pe
     let _ = writeln!(s, "\n## Per-state cost beside a raw publish\n");
     let _ = writeln!(
         s,
-        "One process publishing {} states with one subscriber each (median of 7 rounds; \
-         `conductor_benches::publish_cost`): `raw` is iceoryx2 loan + write + send with the \
-         states' settings, `staged` the executor's path (stage every state, the snapshot, \
-         then each state). The executor's cost per state is the slope of its CPU per tick \
-         between the stress runs' smallest and largest state counts (all of its per-state \
-         work: stages, publish, stats).\n",
+        "One process publishing {} states with one subscriber each, and with none (median of \
+         7 rounds; `conductor_benches::publish_cost`): `raw` is iceoryx2 loan + write + send \
+         with the states' settings, `staged` the executor's path (stage every state, the \
+         snapshot, then each state). The executor's cost per state is the slope of its CPU \
+         per tick between the stress runs' smallest and largest state counts (all of its \
+         per-state work: stages, publish, stats), beside the raw publish with the \
+         subscribers its readers bring (one per state for `states`, none for `snapshot`).\n",
         publish[0].states
     );
     let _ = writeln!(
         s,
-        "| path | ns per state | ns per tick (with the tick event) |\n|---|---|---|"
+        "| path | subscribers per state | ns per state | ns per tick (with the tick event) |\n|---|---|---|---|"
     );
     for p in publish {
         let _ = writeln!(
             s,
-            "| {} | {:.0} | {:.0} |",
-            p.path, p.per_state_ns, p.per_tick_ns
+            "| {} | {} | {:.0} | {:.0} |",
+            p.path, p.subscribers, p.per_state_ns, p.per_tick_ns
         );
     }
     if per_state.is_empty() {
