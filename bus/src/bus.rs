@@ -65,11 +65,13 @@ pub mod qos {
             .enable_safe_overflow(true)
     }
 
-    /// Subscribers of a subsystem's snapshot.
+    /// Subscribers of a subsystem's snapshot (as many as of a state).
     pub const SNAPSHOT_SUBSCRIBERS: usize = 16;
-    /// Most snapshots a snapshot subscriber may queue (a controller wants the newest only; a
-    /// logger that must see every tick reads them all).
-    pub const SNAPSHOT_BUFFER: usize = 16;
+    /// Most snapshots a snapshot subscriber may queue: a controller wants the newest only; a
+    /// logger that must see every tick reads them all and loses none while it is held off the
+    /// CPU for up to this many ticks (6.4 ms at 10 kHz). The service's shared memory is about
+    /// subscribers × this × states × 48 bytes (2 MB for 41 states).
+    pub const SNAPSHOT_BUFFER: usize = 64;
 
     /// A snapshot service's settings: as a state's (two publishers, history of one, safe
     /// overflow), with queues of at most [`SNAPSHOT_BUFFER`] snapshots.

@@ -298,6 +298,10 @@ pub struct Report {
     pub link: String,
     /// The exporting bridge's spin (µs; `None`: its default).
     pub spin_us: Option<u64>,
+    /// Every CPU was held out of deep idle states for the run (`/dev/cpu_dma_latency` at 0), as
+    /// on a host whose executor runs (it holds the same while it lives): both raw Zenoh and the
+    /// bridges wake from the same idle states. `false` when that could not be had (not root).
+    pub deep_idle_off: bool,
     /// Latency p50/p99 (µs), the bench's thread busy-polling: local bus.
     pub local_us: (f64, f64),
     /// Raw Zenoh pub/sub over the link.
@@ -344,8 +348,13 @@ impl Report {
         let spin = self
             .spin_us
             .map_or("the bridge's default".to_string(), |u| format!("{u} µs"));
+        let idle = if self.deep_idle_off {
+            "deep idle states held off, as on a host running an executor"
+        } else {
+            "deep idle states allowed"
+        };
         format!(
-            "### Bridge ({link}; export spin {spin})\n\n\
+            "### Bridge ({link}; export spin {spin}; {idle})\n\n\
              | path | p50 µs | p99 µs | p50 vs raw Zenoh | p99 vs raw Zenoh |\n|---|---|---|---|---|\n\
              {}{}{}{}{}{}\n\
              The goal (≤ 1.2× at p50) compares \"bridge: on B's bus\" with raw Zenoh: both from the \
@@ -381,6 +390,9 @@ impl Report {
 
 /// Runs the whole benchmark.
 pub fn run(o: &Options) -> Result<Report> {
+    // A robot host runs its executors, and an executor holds every CPU out of deep idle states
+    // while it lives; so does this run, for raw Zenoh and the bridges alike.
+    let deep_idle_off = conductor_bus::rt::hold_wakeup_latency(0).is_ok();
     // SAFETY: geteuid has no preconditions.
     let root = unsafe { libc::geteuid() } == 0;
     let netns = if root && !o.loopback {
@@ -569,6 +581,7 @@ pub fn run(o: &Options) -> Result<Report> {
     Ok(Report {
         link: sides.describe().into(),
         spin_us: o.spin_us,
+        deep_idle_off,
         local_us,
         zenoh_us,
         bridge_us,
