@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Domain, StateSubscriber};
 use conductor_examples::{motor, sim};
+use conductor_testkit::number_after;
 use serde_json::Value;
 use support::*;
 
@@ -242,12 +243,7 @@ fn replay_loops_until_interrupted() {
     // 0..19, 0..19, ...: at least two passes finished before the interrupt.
     let want: Vec<f64> = (0..values.len()).map(|i| (i % 20) as f64).collect();
     assert_eq!(values, want);
-    let passes: u64 = stderr
-        .split("sample(s) in ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{stderr}"));
+    let passes: u64 = number_after(&stderr, "sample(s) in ");
     assert!(passes >= 2, "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use conductor_bus::{
     status, Bus, CommandReceiver, Controller, Domain, StatePublisher, StateSubscriber,
 };
+use conductor_testkit::number_after;
 use support::*;
 
 #[test]
@@ -322,12 +323,7 @@ fn a_recording_cut_by_sigkill_still_replays_and_plots() {
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("ends early"), "{stderr}");
     // At least the chunks closed each second: 1 s of 3 states at 500 Hz.
-    let published: u64 = stderr
-        .split("replayed ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{stderr}"));
+    let published: u64 = number_after(&stderr, "replayed ");
     assert!(published >= 3 * 450, "{stderr}");
 
     let png = dir.join("killed.png");
