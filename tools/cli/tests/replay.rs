@@ -15,13 +15,10 @@ use support::*;
 
 #[test]
 fn a_recording_cut_by_sigint_is_finalised_and_reads() {
-    let d = Domain::unique("sigint").unwrap();
-    let _leg = hold_sim(&d, "leg", 500.0, leg(500.0));
+    let (d, _leg) = domain_with_leg("sigint", 500.0, leg);
     let dir = tempdir("sigint");
     let file = dir.join("cut.mcap");
-    let mut cmd = conductor(&d);
-    cmd.args(["record", "*", "--no-progress", "-o"]).arg(&file);
-    let rec = Bg::spawn(&mut cmd);
+    let rec = Bg::spawn(&mut record(&d, &["*"], &file));
     std::thread::sleep(Duration::from_millis(1500));
     let (success, stderr) = rec.interrupt();
     assert!(success, "{stderr}");
