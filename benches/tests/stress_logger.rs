@@ -5,12 +5,12 @@
 
 use std::collections::HashMap;
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use conductor_benches::stress::parse_line;
 use conductor_bus::{Bus, Domain, RtIpc, StatsSubscriber};
 use conductor_executor::launcher::{Launch, LaunchOptions};
-use conductor_testkit::workspace;
+use conductor_testkit::{eventually, workspace};
 use iceoryx2::testing::remove_global_mgmt_segment;
 
 const STRESS: &str = env!("CARGO_BIN_EXE_conductor-stress");
@@ -18,14 +18,9 @@ const STRESS: &str = env!("CARGO_BIN_EXE_conductor-stress");
 /// Deadline misses of a subsystem so far, from its stats (within 5 s).
 fn misses(bus: &Bus, subsystem: &str) -> u64 {
     let mut s = StatsSubscriber::new(bus, subsystem).unwrap();
-    let end = Instant::now() + Duration::from_secs(5);
-    loop {
-        if let Some(stats) = s.latest().unwrap() {
-            return stats.misses;
-        }
-        assert!(Instant::now() < end, "no stats within 5 s");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    eventually(Duration::from_secs(5), "stats", || {
+        s.latest().unwrap().map(|stats| stats.misses)
+    })
 }
 
 #[test]

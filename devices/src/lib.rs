@@ -27,6 +27,21 @@
 
 #![warn(missing_docs)]
 
+/// Implements `Debug` for a type by the fields named, in that order: the transports and
+/// simulators hold OS handles, threads and buffers with nothing to read in a log, so each
+/// shows only what identifies it.
+macro_rules! debug_fields {
+    ($ty:ident { $($field:ident),+ $(,)? }) => {
+        impl std::fmt::Debug for $ty {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.debug_struct(stringify!($ty))
+                    $(.field(stringify!($field), &self.$field))+
+                    .finish()
+            }
+        }
+    };
+}
+
 mod component;
 pub mod device;
 pub mod hw;

@@ -269,6 +269,19 @@ pub(crate) trait LifeStep: Copy + PartialEq {
     const SAFE: Self;
 }
 
+/// Implements [`LifeStep`] for a device's step enum whose variants `None`, `Probe` and `Safe`
+/// are the three the shared rules name (every managed device's enum has them).
+macro_rules! life_step {
+    ($step:ident) => {
+        impl $crate::lifecycle::LifeStep for $step {
+            const NONE: Self = $step::None;
+            const PROBE: Self = $step::Probe;
+            const SAFE: Self = $step::Safe;
+        }
+    };
+}
+pub(crate) use life_step;
+
 /// The lifecycle bookkeeping every managed device keeps: its status, where it should end, and
 /// the step under way with its retries. Plain data: nothing here allocates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -557,11 +570,7 @@ mod tests {
         Safe,
     }
 
-    impl LifeStep for S {
-        const NONE: Self = S::None;
-        const PROBE: Self = S::Probe;
-        const SAFE: Self = S::Safe;
-    }
+    life_step!(S);
 
     fn in_phase(phase: Phase) -> Lifecycle<S> {
         let mut l = Lifecycle::new();

@@ -6,9 +6,9 @@
 //! 1e-6 rad; the plant integrates, so no steady offset can remain. 0.01 rad leaves room for the
 //! loop delays of a loaded machine, which slow the transient but do not stop it.
 
-use conductor_testkit::{python, workspace};
+use conductor_testkit::{eventually, python, workspace};
 use std::process::Command;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use conductor_bus::{Bus, Domain, StateSubscriber};
 use conductor_examples::{motor, sim};
@@ -16,14 +16,9 @@ use conductor_examples::{motor, sim};
 fn position(d: &Domain) -> f64 {
     let bus = Bus::open(d, "check").unwrap();
     let mut sub = StateSubscriber::new(&bus, "motor/position").unwrap();
-    let end = Instant::now() + Duration::from_secs(2);
-    loop {
-        if let Some(s) = sub.latest().unwrap() {
-            return s.value;
-        }
-        assert!(Instant::now() < end, "no position sample");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    eventually(Duration::from_secs(2), "a position sample", || {
+        sub.latest().unwrap().map(|s| s.value)
+    })
 }
 
 fn run_json(cmd: &mut Command) -> serde_json::Value {

@@ -1,15 +1,12 @@
 //! Golden vectors for MIT mode (protocols.md §2.1) and ODrive CAN Simple (§2.2).
 
+mod golden;
+
 use conductor_protocols::can::CanFrame;
 use conductor_protocols::mit_can::*;
 use conductor_protocols::odrive_can::{self, *};
 use embedded_can::Frame;
-
-fn hex(s: &str) -> Vec<u8> {
-    s.split_whitespace()
-        .map(|b| u8::from_str_radix(b, 16).unwrap())
-        .collect()
-}
+use golden::hex;
 
 const AK80_9: Limits = Model::Ak80_9.limits();
 

@@ -1,18 +1,9 @@
 //! Golden vectors from protocols.md §1.11 (e-Manual protocol1.md examples, all verified).
 
+mod golden;
+
 use conductor_protocols::dynamixel1::*;
-
-fn hex(s: &str) -> Vec<u8> {
-    s.split_whitespace()
-        .map(|b| u8::from_str_radix(b, 16).unwrap())
-        .collect()
-}
-
-fn enc(f: impl FnOnce(&mut [u8]) -> Result<usize, EncodeError>) -> Vec<u8> {
-    let mut buf = [0u8; 128];
-    let n = f(&mut buf).unwrap();
-    buf[..n].to_vec()
-}
+use golden::{enc, hex};
 
 #[test]
 fn checksum_worked_example() {

@@ -1,19 +1,10 @@
 //! Golden vectors from protocols.md §1.4, §1.7 and §1.8 (e-Manual examples with the two wrong
 //! CRCs corrected, plus the derived vectors).
 
+mod golden;
+
 use conductor_protocols::dynamixel2::{self as dxl, *};
-
-fn hex(s: &str) -> Vec<u8> {
-    s.split_whitespace()
-        .map(|b| u8::from_str_radix(b, 16).unwrap())
-        .collect()
-}
-
-fn enc(f: impl FnOnce(&mut [u8]) -> Result<usize, EncodeError>) -> Vec<u8> {
-    let mut buf = [0u8; 256];
-    let n = f(&mut buf).unwrap();
-    buf[..n].to_vec()
-}
+use golden::{enc, hex};
 
 #[test]
 fn instruction_examples_from_the_manual() {

@@ -22,7 +22,8 @@
 
 use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
-    DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, LOST_ROUNDS, ROUND_TIMEOUT_NS,
+    life_step, DeviceStatus, Failure, Goal, Lifecycle, Phase, Startup, LOST_ROUNDS,
+    ROUND_TIMEOUT_NS,
 };
 use crate::message::{Credential, MitSpecial, Op, Reply, ReplyData, Request, Update};
 use crate::queue::Bounded;
@@ -80,11 +81,7 @@ enum Step {
     Safe,
 }
 
-impl LifeStep for Step {
-    const NONE: Self = Step::None;
-    const PROBE: Self = Step::Probe;
-    const SAFE: Self = Step::Safe;
-}
+life_step!(Step);
 
 /// An MIT-mode motor.
 #[derive(Debug)]

@@ -25,7 +25,7 @@ use conductor_protocols::odrive_can::{axis_state, control_mode, input_mode, CmdI
 
 use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
-    DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, PROBE_TRIES,
+    life_step, DeviceStatus, Failure, Goal, Lifecycle, Phase, Startup, PROBE_TRIES,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
 use crate::protocol_stage::odrive_get;
@@ -83,11 +83,7 @@ enum Step {
     Safe,
 }
 
-impl LifeStep for Step {
-    const NONE: Self = Step::None;
-    const PROBE: Self = Step::Probe;
-    const SAFE: Self = Step::Safe;
-}
+life_step!(Step);
 
 /// Which input the axis's controller takes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

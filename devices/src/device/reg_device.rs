@@ -25,7 +25,7 @@
 use super::control_table::{ConfigItem, ControlTable, RegChannel};
 use crate::component::{Channel, Device, SafeAction, TickCtx};
 use crate::lifecycle::{
-    Backoff, DeviceStatus, Failure, Goal, LifeStep, Lifecycle, Phase, Startup, LOST_ROUNDS,
+    life_step, Backoff, DeviceStatus, Failure, Goal, Lifecycle, Phase, Startup, LOST_ROUNDS,
     REG_ROUND_TIMEOUT_NS,
 };
 use crate::message::{Credential, Op, Reply, ReplyData, Request, Update};
@@ -73,11 +73,7 @@ enum Step {
     SafeAlign,
 }
 
-impl LifeStep for Step {
-    const NONE: Self = Step::None;
-    const PROBE: Self = Step::Probe;
-    const SAFE: Self = Step::Safe;
-}
+life_step!(Step);
 
 /// The lifecycle state of a register device.
 #[derive(Debug)]

@@ -95,14 +95,7 @@ impl Drop for SerialHardware {
     }
 }
 
-impl std::fmt::Debug for SerialHardware {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SerialHardware")
-            .field("path", &self.path)
-            .field("low_latency", &self.low_latency)
-            .finish()
-    }
-}
+debug_fields!(SerialHardware { path, low_latency });
 
 impl SerialHardware {
     /// Opens `path` (8N1, no flow control), makes it non-blocking and, if asked, low-latency.

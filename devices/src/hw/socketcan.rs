@@ -69,13 +69,7 @@ pub struct SocketCanHardware {
     last_error: (u32, [u8; 8]),
 }
 
-impl std::fmt::Debug for SocketCanHardware {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SocketCanHardware")
-            .field("iface", &self.iface)
-            .finish()
-    }
-}
+debug_fields!(SocketCanHardware { iface });
 
 impl SocketCanHardware {
     /// Opens `iface` (the interface must exist and be up: `ip link set can0 up type can

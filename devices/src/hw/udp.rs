@@ -20,13 +20,7 @@ pub struct UdpHardware {
     held_pos: usize,
 }
 
-impl std::fmt::Debug for UdpHardware {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("UdpHardware")
-            .field("peer", &self.peer)
-            .finish()
-    }
-}
+debug_fields!(UdpHardware { peer });
 
 /// Payload per datagram.
 const MTU_PAYLOAD: usize = 1472;

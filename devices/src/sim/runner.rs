@@ -35,14 +35,7 @@ pub struct Pty {
     link: Option<PathBuf>,
 }
 
-impl std::fmt::Debug for Pty {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Pty")
-            .field("path", &self.path)
-            .field("link", &self.link)
-            .finish()
-    }
-}
+debug_fields!(Pty { path, link });
 
 impl Pty {
     /// A new pty; with `link`, a symlink at that path points to the slave (an existing file

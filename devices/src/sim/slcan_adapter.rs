@@ -76,14 +76,7 @@ pub struct SlcanAdapterSim {
     wire: Option<(FaultInjector, FaultInjector)>,
 }
 
-impl std::fmt::Debug for SlcanAdapterSim {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SlcanAdapterSim")
-            .field("open", &self.open)
-            .field("stats", &self.stats)
-            .finish()
-    }
-}
+debug_fields!(SlcanAdapterSim { open, stats });
 
 impl SlcanAdapterSim {
     /// An adapter speaking `dialect`, with `nodes` on its bus.

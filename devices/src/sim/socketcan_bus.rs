@@ -33,13 +33,7 @@ pub struct SocketCanSim {
     iface: String,
 }
 
-impl std::fmt::Debug for SocketCanSim {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SocketCanSim")
-            .field("iface", &self.iface)
-            .finish()
-    }
-}
+debug_fields!(SocketCanSim { iface });
 
 impl SocketCanSim {
     /// Starts `nodes` on interface `iface` (which must exist and be up).

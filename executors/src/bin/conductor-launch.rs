@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::Parser;
-use conductor_executor::launcher::{launch, load_manifest, LaunchError, LaunchOptions};
+use conductor_executor::launcher::{check_manifest, launch, launch_exit, LaunchOptions};
 
 #[derive(Parser)]
 #[command(
@@ -45,21 +45,7 @@ struct Cli {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if cli.check {
-        return match load_manifest(&cli.manifest) {
-            Ok(m) => {
-                println!(
-                    "{}: valid ({} subsystems, {} gateways)",
-                    cli.manifest.display(),
-                    m.subsystems.len(),
-                    m.gateways.len()
-                );
-                ExitCode::SUCCESS
-            }
-            Err(e) => {
-                eprintln!("{e}");
-                ExitCode::from(2)
-            }
-        };
+        return check_manifest(&cli.manifest);
     }
     let mut opts = LaunchOptions {
         domain: cli.domain,
@@ -75,15 +61,5 @@ fn main() -> ExitCode {
     if let Some(g) = cli.gateway {
         opts.gateway = g;
     }
-    match launch(&cli.manifest, opts) {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(e @ LaunchError::Manifest(_)) => {
-            eprintln!("{e}");
-            ExitCode::from(2)
-        }
-        Err(e) => {
-            eprintln!("conductor: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    launch_exit(launch(&cli.manifest, opts))
 }

@@ -21,6 +21,7 @@ mod options;
 mod supervisor;
 
 use std::path::Path;
+use std::process::ExitCode;
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -112,6 +113,47 @@ pub fn load_manifest(path: &Path) -> Result<Manifest, ManifestError> {
         note!("{}", manifest.render_warnings());
     }
     Ok(manifest)
+}
+
+/// Exit status of the launchers (`conductor-launch`, `conductor launch`) for a manifest that
+/// does not load or validate: the executor's.
+pub const EXIT_MANIFEST: u8 = 2;
+
+/// A launcher's `--check`: loads and validates the manifest at `path` and says on stdout what it
+/// holds; an invalid one gets its error on stderr and [`EXIT_MANIFEST`].
+pub fn check_manifest(path: &Path) -> ExitCode {
+    match load_manifest(path) {
+        Ok(m) => {
+            println!(
+                "{}: valid ({} subsystems, {} gateways{})",
+                path.display(),
+                m.subsystems.len(),
+                m.gateways.len(),
+                if m.view.is_some() { ", a view" } else { "" }
+            );
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("{e}");
+            ExitCode::from(EXIT_MANIFEST)
+        }
+    }
+}
+
+/// A launcher's exit status once [`launch`] returned: an invalid manifest's error is printed as
+/// it is, with [`EXIT_MANIFEST`]; any other error as `conductor: …`, with failure.
+pub fn launch_exit(result: Result<LaunchReport, LaunchError>) -> ExitCode {
+    match result {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e @ LaunchError::Manifest(_)) => {
+            eprintln!("{e}");
+            ExitCode::from(EXIT_MANIFEST)
+        }
+        Err(e) => {
+            eprintln!("conductor: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 /// Launches and blocks until a stop request (SIGINT/SIGTERM when `handle_signals`), then stops

@@ -175,19 +175,25 @@ pub fn run(args: &ControllerArgs) -> Result<(), Box<dyn std::error::Error>> {
         }
         ctl.send_ctrl()?;
         sent += 1;
-        if monotonic_ns() < flood_until.load(Ordering::Relaxed) {
-            // Back to back, only yielding the CPU.
-            std::thread::yield_now();
-            next = Instant::now();
-            continue;
-        }
-        next += period;
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
+        pace(&mut next, period, &flood_until);
+    }
+}
+
+/// Waits for a controller's next frame: none while a flood asked for by [`flood_requests`]
+/// lasts (back to back, only yielding the CPU), else until `next` advanced by `period` (a late
+/// frame moves `next` to now rather than bursting to catch up).
+pub(super) fn pace(next: &mut Instant, period: Duration, flood_until: &AtomicU64) {
+    if monotonic_ns() < flood_until.load(Ordering::Relaxed) {
+        std::thread::yield_now();
+        *next = Instant::now();
+        return;
+    }
+    *next += period;
+    let now = Instant::now();
+    if *next > now {
+        std::thread::sleep(*next - now);
+    } else {
+        *next = now;
     }
 }
 

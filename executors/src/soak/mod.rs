@@ -105,7 +105,7 @@ pub const EVENTS: [Fault; 5] = [
     Fault::Flood,
 ];
 
-/// A controller process.
+/// A controller process (a robot's here, the Score board's in [`score_campaign`]).
 struct Ctl {
     child: Child,
     stdin: ChildStdin,
@@ -113,23 +113,18 @@ struct Ctl {
 }
 
 impl Ctl {
-    fn start(o: &Options, robot: &Robot, domain: &str, seed: u64) -> std::io::Result<Ctl> {
-        let (prog, pre) = o
-            .controller
+    /// The controller `program` (its path, then arguments of its own) as a command.
+    fn command(program: &[String]) -> std::io::Result<Command> {
+        let (prog, pre) = program
             .split_first()
             .ok_or_else(|| std::io::Error::other("no controller program"))?;
         let mut cmd = Command::new(prog);
-        cmd.args(pre)
-            .args(["--domain", domain, "--subsystem", &robot.subsystem])
-            .args([
-                "--rate-hz",
-                &o.rate_hz.to_string(),
-                "--seed",
-                &seed.to_string(),
-            ]);
-        for j in &robot.joints {
-            cmd.args(["--joint", &j.to_arg()]);
-        }
+        cmd.args(pre);
+        Ok(cmd)
+    }
+
+    /// Starts `cmd` with its stdin open for requests and its stdout lines on a channel.
+    fn spawn(cmd: &mut Command) -> std::io::Result<Ctl> {
         let mut child = cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).spawn()?;
         let stdin = child.stdin.take().expect("piped");
         let out = child.stdout.take().expect("piped");
@@ -146,6 +141,21 @@ impl Ctl {
             stdin,
             lines,
         })
+    }
+
+    fn start(o: &Options, robot: &Robot, domain: &str, seed: u64) -> std::io::Result<Ctl> {
+        let mut cmd = Self::command(&o.controller)?;
+        cmd.args(["--domain", domain, "--subsystem", &robot.subsystem])
+            .args([
+                "--rate-hz",
+                &o.rate_hz.to_string(),
+                "--seed",
+                &seed.to_string(),
+            ]);
+        for j in &robot.joints {
+            cmd.args(["--joint", &j.to_arg()]);
+        }
+        Self::spawn(&mut cmd)
     }
 
     fn pid(&self) -> Pid {

@@ -17,11 +17,9 @@
 //!   controller's grid.
 
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader, Write};
+use std::io::Write;
 use std::path::PathBuf;
-use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{channel, Receiver};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -38,6 +36,7 @@ use super::controller::RawSender;
 use super::monitor::lock;
 use super::report::{Check, Report, Resources};
 use super::score_rig::{self, BoardSim, OUTPUTS, SUBSYSTEM, WATCHED};
+use super::Ctl;
 
 /// The gateway's main loop waits at most this long for the board (its port read timeout): one
 /// "tick" of the gateway.
@@ -412,74 +411,22 @@ pub fn run_controller(args: &ControllerArgs) -> Result<(), Box<dyn std::error::E
             writeln!(out, "running")?;
             out.flush()?;
         }
-        if monotonic_ns() < flood_until.load(Ordering::Relaxed) {
-            std::thread::yield_now();
-            next = Instant::now();
-            continue;
-        }
-        next += period;
-        let now = Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
+        super::controller::pace(&mut next, period, &flood_until);
     }
 }
 
-struct Ctl {
-    child: Child,
-    stdin: ChildStdin,
-    lines: Receiver<String>,
-}
-
-impl Ctl {
-    fn start(program: &[String], domain: &str, rate_hz: f64, seed: u64) -> std::io::Result<Ctl> {
-        let (prog, pre) = program
-            .split_first()
-            .ok_or_else(|| std::io::Error::other("no controller program"))?;
-        let mut child = Command::new(prog)
-            .args(pre)
-            .args([
-                "--domain",
-                domain,
-                "--rate-hz",
-                &rate_hz.to_string(),
-                "--seed",
-                &seed.to_string(),
-            ])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::piped())
-            .spawn()?;
-        let stdin = child.stdin.take().expect("piped");
-        let out = child.stdout.take().expect("piped");
-        let (tx, lines) = channel();
-        std::thread::spawn(move || {
-            for l in BufReader::new(out).lines().map_while(Result::ok) {
-                if tx.send(l).is_err() {
-                    break;
-                }
-            }
-        });
-        Ok(Ctl {
-            child,
-            stdin,
-            lines,
-        })
-    }
-
-    fn running(&self, within: Duration) -> bool {
-        matches!(self.lines.recv_timeout(within), Ok(l) if l == "running")
-    }
-
-    fn pid(&self) -> Pid {
-        Pid::from_raw(self.child.id() as i32)
-    }
-
-    fn kill(mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+/// Starts the board's controller process (`program`, then its own arguments).
+fn start_ctl(program: &[String], domain: &str, rate_hz: f64, seed: u64) -> std::io::Result<Ctl> {
+    let mut cmd = Ctl::command(program)?;
+    cmd.args([
+        "--domain",
+        domain,
+        "--rate-hz",
+        &rate_hz.to_string(),
+        "--seed",
+        &seed.to_string(),
+    ]);
+    Ctl::spawn(&mut cmd)
 }
 
 // ---------------------------------------------------------------- the monitor
@@ -768,7 +715,7 @@ impl Run {
 
     fn start_controller(&mut self) -> Result<(), String> {
         let seed = self.rng.next_u64();
-        let ctl = Ctl::start(
+        let ctl = start_ctl(
             &self.c.controller,
             self.c.domain.name(),
             self.c.rate_hz,
@@ -1029,8 +976,7 @@ impl Run {
         let pid = gateway_pid(&link);
         let ms = 100 + self.rng.below(200);
         let ctl = self.ctl.as_mut().ok_or("no controller")?;
-        let _ = writeln!(ctl.stdin, "flood {ms}");
-        let _ = ctl.stdin.flush();
+        ctl.flood(ms);
         std::thread::sleep(Duration::from_millis(ms + 20));
         let t = monotonic_ns();
         let done = self

@@ -2,7 +2,7 @@
 //! static placement the firmware needs.
 mod common;
 
-use common::{board, refused, run, run_until};
+use common::{board, engine_and_board, refused, run, run_until};
 use score_core::{Engine, Num, Real, VarKind};
 
 // A firmware keeps the engine in a static: `new` must be usable in a const context.
@@ -74,8 +74,7 @@ fn pid_with_limits_does_not_wind_up() {
 
 #[test]
 fn gpio_and_temperature_channels() {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     b.hw.adc_code = 200;
     run(
         &mut e,
@@ -101,8 +100,7 @@ fn gpio_and_temperature_channels() {
 
 #[test]
 fn variables_defined_later_start_at_the_time_they_are_typed() {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     run(&mut e, &mut b, "defexp one 1\ndefint A one 1000");
     run_until(&mut e, &mut b, 500);
     e.set_time(500);

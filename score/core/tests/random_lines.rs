@@ -3,9 +3,8 @@
 //! in score/core/fuzz covers arbitrary bytes).
 mod common;
 
-use common::board;
+use common::engine_and_board;
 use proptest::prelude::*;
-use score_core::{Engine, Num};
 
 fn token() -> impl Strategy<Value = String> {
     prop_oneof![
@@ -84,8 +83,7 @@ proptest! {
 
     #[test]
     fn lines_never_panic_and_failures_change_nothing(lines in prop::collection::vec(line(), 1..24)) {
-        let mut e: Engine<Num> = Engine::new();
-        let mut b = board();
+        let (mut e, mut b) = engine_and_board();
         b.files.add_input("in.txt", vec![1.0, -1.0]);
         let mut t = 0u64;
         for l in &lines {

@@ -4,13 +4,12 @@
 //! used before its definition is pointed out.
 mod common;
 
-use common::{board, refused, run, run_until, MemBoard};
+use common::{engine_and_board, refused, run, run_until, MemBoard};
 use score_core::{Engine, Error, Num, Outcome, Real};
 
 /// `x = num / den`, an input that the test makes finite, infinite or NaN with `set`.
 fn with_input(extra: &str) -> (Engine<Num>, MemBoard) {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     run(
         &mut e,
         &mut b,
@@ -111,8 +110,7 @@ fn outputs_go_to_rest_on_nan() {
 
 #[test]
 fn a_non_finite_definition_and_a_forward_reference_are_pointed_out() {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     let out = run(&mut e, &mut b, "defexp z 1 0 /");
     assert!(
         out.contains("note: 'z' is inf now (a division by zero"),
@@ -138,8 +136,7 @@ fn a_non_finite_definition_and_a_forward_reference_are_pointed_out() {
 
 #[test]
 fn run_refuses_durations_no_clock_can_hold() {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     let mut out = String::new();
     for bad in ["1e30", "inf", "-inf", "nan", "-5", "1000000001", "1e999"] {
         let line = format!("run {bad}");
@@ -163,16 +160,14 @@ fn run_refuses_durations_no_clock_can_hold() {
 
 #[test]
 fn a_byte_order_mark_is_not_part_of_the_command() {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     run(&mut e, &mut b, "\u{feff}defexp k 2");
     assert_eq!(e.value_of("k"), Some(2.0));
 }
 
 #[test]
 fn invisible_characters_are_shown_in_messages() {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     assert_eq!(
         refused(&mut e, &mut b, "def\u{200b}exp k 2"),
         "unknown command 'def\\u{200b}exp' (type 'help' for the list of commands)"
@@ -183,8 +178,7 @@ fn invisible_characters_are_shown_in_messages() {
 
 #[test]
 fn errors_point_at_their_column() {
-    let mut e: Engine<Num> = Engine::new();
-    let mut b = board();
+    let (mut e, mut b) = engine_and_board();
     let mut out = String::new();
     run(&mut e, &mut b, "defexp Kp 1\ndefexp a Kp 1 +");
     let mut column = |line: &str| -> (Option<usize>, Error) {

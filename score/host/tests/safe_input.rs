@@ -10,7 +10,7 @@ use score_core::Real;
 use score_host::{Session, SessionError, TimeMode};
 
 use common::{score, score_in};
-use conductor_testkit::run_ok;
+use conductor_testkit::{number_after, run_ok};
 
 #[test]
 fn run_never_moves_the_simulated_clock_past_its_end_or_backwards() {
@@ -100,12 +100,7 @@ fn ctrl_c_stops_a_long_run_and_the_session_continues() {
     }
     let status = child.wait().unwrap();
     let text = rest.join("\n");
-    let at: f64 = text
-        .split("error: run: interrupted at t = ")
-        .nth(1)
-        .and_then(|r| r.split(' ').next())
-        .and_then(|t| t.parse().ok())
-        .unwrap_or_else(|| panic!("no interruption message: {text}"));
+    let at: f64 = number_after(&text, "error: run: interrupted at t = ");
     assert!(at > 0.0 && at < 1e9, "{at}");
     // The next lines ran, at the instant where the run stopped.
     assert!(text.contains("ADC0 - "), "{text}");

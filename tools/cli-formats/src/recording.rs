@@ -402,12 +402,7 @@ mod tests {
     fn schema_is_json_and_names_every_field() {
         let v: serde_json::Value = serde_json::from_str(SCHEMA).unwrap();
         let props = v["properties"].as_object().unwrap();
-        let req: Vec<&str> = v["required"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_str().unwrap())
-            .collect();
+        let req = conductor_testkit::json_strings(&v["required"]);
         // Every field of Message is described and required.
         let m = serde_json::to_value(Message::of_sample(0.0, 0, 0, 0, 0)).unwrap();
         for k in m.as_object().unwrap().keys() {

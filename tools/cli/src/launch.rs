@@ -7,33 +7,15 @@ use std::ffi::OsString;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use conductor_executor::launcher::{launch, load_manifest, LaunchError, LaunchOptions};
+use conductor_executor::launcher::{check_manifest, launch, launch_exit, LaunchOptions};
 
 use crate::cli::LaunchArgs;
-
-/// Exit status for an invalid manifest (the executor uses the same).
-const EXIT_MANIFEST: u8 = 2;
 
 /// Validates and launches; returns when every executor has stopped. Call it from `main` before
 /// any other thread exists: the launcher takes SIGINT/SIGTERM over with a `sigwait` thread.
 pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
     if a.check {
-        return match load_manifest(&a.manifest) {
-            Ok(m) => {
-                println!(
-                    "{}: valid ({} subsystems, {} gateways{})",
-                    a.manifest.display(),
-                    m.subsystems.len(),
-                    m.gateways.len(),
-                    if m.view.is_some() { ", a view" } else { "" }
-                );
-                ExitCode::SUCCESS
-            }
-            Err(e) => {
-                eprintln!("{e}");
-                ExitCode::from(EXIT_MANIFEST)
-            }
-        };
+        return check_manifest(&a.manifest);
     }
     let exe = match std::env::current_exe() {
         Ok(p) => p,
@@ -60,17 +42,7 @@ pub fn run(domain: Option<&str>, a: &LaunchArgs) -> ExitCode {
         handle_signals: true,
         ..LaunchOptions::default()
     };
-    match launch(&a.manifest, opts) {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(e @ LaunchError::Manifest(_)) => {
-            eprintln!("{e}");
-            ExitCode::from(EXIT_MANIFEST)
-        }
-        Err(e) => {
-            eprintln!("conductor: {e}");
-            ExitCode::FAILURE
-        }
-    }
+    launch_exit(launch(&a.manifest, opts))
 }
 
 /// Runs one executor with its own arguments (what `launch` spawns).

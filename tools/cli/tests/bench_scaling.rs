@@ -153,12 +153,7 @@ fn quick_scaling_writes_points_fits_and_curves() {
     }
 
     // The curves.
-    let listed: Vec<&str> = j["plots"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|p| p.as_str().unwrap())
-        .collect();
+    let listed = conductor_testkit::json_strings(&j["plots"]);
     let want: Vec<String> = ["states", "subscribers", "executors"]
         .iter()
         .flat_map(|s| [format!("cpu-vs-{s}.png"), format!("latency-vs-{s}.png")])

@@ -25,8 +25,7 @@ fn leg_states(rate: f64) -> Vec<conductor_bus::StateSpec> {
 
 #[test]
 fn list_shows_every_state_with_metadata() {
-    let d = Domain::unique("list").unwrap();
-    let _leg = hold_sim(&d, "leg", 200.0, leg_states(200.0));
+    let (d, _leg) = domain_with_leg("list", 200.0, leg_states);
     let _arm = hold_sim(
         &d,
         "arm",
@@ -116,8 +115,7 @@ fn list_shows_every_state_with_metadata() {
 
 #[test]
 fn set_moves_a_state_and_get_reads_it_back() {
-    let d = Domain::unique("setget").unwrap();
-    let leg = hold_sim(&d, "leg", 200.0, leg_states(200.0));
+    let (d, leg) = domain_with_leg("setget", 200.0, leg_states);
     let get = || {
         ok(conductor(&d).args(["get", "leg/knee", "--raw"]))
             .trim()
@@ -158,8 +156,7 @@ fn set_moves_a_state_and_get_reads_it_back() {
 
 #[test]
 fn get_describes_the_sample() {
-    let d = Domain::unique("get").unwrap();
-    let _leg = hold_sim(&d, "leg", 100.0, leg_states(100.0));
+    let (d, _leg) = domain_with_leg("get", 100.0, leg_states);
     let out = ok(conductor(&d).args(["get", "current"]));
     assert!(out.starts_with("leg/current = 0 A  (seq "), "{out}");
     assert!(out.contains("flags simulated)"), "{out}");
@@ -169,8 +166,7 @@ fn get_describes_the_sample() {
 
 #[test]
 fn echo_prints_at_the_requested_rate() {
-    let d = Domain::unique("echo").unwrap();
-    let _leg = hold_sim(&d, "leg", 200.0, leg_states(200.0));
+    let (d, _leg) = domain_with_leg("echo", 200.0, leg_states);
     let out = ok(conductor(&d).args(["echo", "leg/knee", "--rate", "20", "--duration", "2"]));
     let times: Vec<f64> = out
         .lines()

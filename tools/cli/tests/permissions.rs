@@ -324,8 +324,7 @@ fn the_udp_gateway_answers_on_loopback_only_unless_bound_elsewhere() {
                 .expect("a non-loopback IPv4 address")
         }
     };
-    let d = Domain::unique("udpbind").unwrap();
-    let _leg = hold_sim(&d, "leg", 200.0, leg(200.0));
+    let (d, _leg) = domain_with_leg("udpbind", 200.0, leg);
     let ask = |to: std::net::SocketAddr| -> Option<String> {
         let s = UdpSocket::bind((to.ip(), 0)).unwrap();
         s.set_read_timeout(Some(Duration::from_millis(500)))

@@ -186,8 +186,7 @@ fn plot_flags_draws_states_and_their_flags_into_a_png() {
 
 #[test]
 fn echo_plot_draws_a_live_chart_with_values_and_flags() {
-    let d = Domain::unique("echoplot").unwrap();
-    let _leg = hold_sim(&d, "leg", 200.0, leg(200.0));
+    let (d, _leg) = domain_with_leg("echoplot", 200.0, leg);
     // One frame beyond knee's limit (2): the simulator clamps it and flags knee CLAMPED until
     // the next frame (`conductor set` would refuse it, or clamp it itself with --clamp).
     let bus = conductor_bus::Bus::open(&d, "test-controller").unwrap();

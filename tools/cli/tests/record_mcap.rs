@@ -3,24 +3,19 @@
 
 mod support;
 
-use conductor_bus::Domain;
 use support::*;
 
 #[test]
 fn record_5s_at_1khz_reads_with_the_official_mcap_package() {
-    let d = Domain::unique("rec").unwrap();
-    let _leg = hold_sim(&d, "leg", 1000.0, leg(1000.0));
+    let (d, _leg) = domain_with_leg("rec", 1000.0, leg);
     let dir = tempdir("rec");
     let file = dir.join("run.mcap");
     let manifest = dir.join("robot.toml");
     let manifest_text = "[subsystem.leg]\nrate_hz = 1000\n";
     std::fs::write(&manifest, manifest_text).unwrap();
-    let mut cmd = conductor(&d);
-    cmd.args(["record", "leg/*", "--duration", "5", "--no-progress", "-o"])
-        .arg(&file)
+    ok(record(&d, &["leg/*", "--duration", "5"], &file)
         .arg("--manifest")
-        .arg(&manifest);
-    ok(&mut cmd);
+        .arg(&manifest));
 
     let r = check_with_python(&file);
     assert_eq!(r["profile"], "conductor");

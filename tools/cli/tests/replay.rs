@@ -9,18 +9,16 @@ use std::time::{Duration, Instant};
 
 use conductor_bus::{status, Bus, Domain, StateSubscriber};
 use conductor_examples::{motor, sim};
+use conductor_testkit::number_after;
 use serde_json::Value;
 use support::*;
 
 #[test]
 fn a_recording_cut_by_sigint_is_finalised_and_reads() {
-    let d = Domain::unique("sigint").unwrap();
-    let _leg = hold_sim(&d, "leg", 500.0, leg(500.0));
+    let (d, _leg) = domain_with_leg("sigint", 500.0, leg);
     let dir = tempdir("sigint");
     let file = dir.join("cut.mcap");
-    let mut cmd = conductor(&d);
-    cmd.args(["record", "*", "--no-progress", "-o"]).arg(&file);
-    let rec = Bg::spawn(&mut cmd);
+    let rec = Bg::spawn(&mut record(&d, &["*"], &file));
     std::thread::sleep(Duration::from_millis(1500));
     let (success, stderr) = rec.interrupt();
     assert!(success, "{stderr}");
@@ -242,12 +240,7 @@ fn replay_loops_until_interrupted() {
     // 0..19, 0..19, ...: at least two passes finished before the interrupt.
     let want: Vec<f64> = (0..values.len()).map(|i| (i % 20) as f64).collect();
     assert_eq!(values, want);
-    let passes: u64 = stderr
-        .split("sample(s) in ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{stderr}"));
+    let passes: u64 = number_after(&stderr, "sample(s) in ");
     assert!(passes >= 2, "{stderr}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 use conductor_bus::{
     status, Bus, CommandReceiver, Controller, Domain, StatePublisher, StateSubscriber,
 };
+use conductor_testkit::number_after;
 use support::*;
 
 #[test]
@@ -61,8 +62,7 @@ fn set_without_a_listening_executor_fails_and_says_so() {
 
 #[test]
 fn list_with_a_pattern_that_matches_nothing_fails() {
-    let d = Domain::unique("listnone").unwrap();
-    let _leg = hold_sim(&d, "leg", 100.0, leg(100.0));
+    let (d, _leg) = domain_with_leg("listnone", 100.0, leg);
     let err = fails(conductor(&d).args(["list", "arm/*"]));
     assert!(err.contains("no state matches \"arm/*\""), "{err}");
     assert!(err.contains("leg/knee"), "{err}");
@@ -95,8 +95,7 @@ fn read_file(file: &Path) -> (Messages, BTreeMap<String, BTreeMap<String, String
 
 #[test]
 fn record_duration_keeps_exactly_the_samples_published_in_its_window() {
-    let d = Domain::unique("window").unwrap();
-    let _leg = hold_sim(&d, "leg", 250.0, leg(250.0));
+    let (d, _leg) = domain_with_leg("window", 250.0, leg);
     // An independent observer of leg/knee, to know every sample and its publish time.
     let bus = Bus::open(&d, "test-observer").unwrap();
     let mut obs = StateSubscriber::with_buffer(&bus, "leg/knee", 256).unwrap();
@@ -104,10 +103,7 @@ fn record_duration_keeps_exactly_the_samples_published_in_its_window() {
     std::thread::sleep(Duration::from_millis(300));
     let dir = tempdir("window");
     let file = dir.join("w.mcap");
-    let mut cmd = conductor(&d);
-    cmd.args(["record", "leg/*", "--duration", "3", "--no-progress", "-o"])
-        .arg(&file);
-    let rec = Bg::spawn(&mut cmd);
+    let rec = Bg::spawn(&mut record(&d, &["leg/*", "--duration", "3"], &file));
     let mut seen = Vec::new();
     let end = Instant::now() + Duration::from_secs(60);
     while !std::fs::read(&file).is_ok_and(|b| mcap::read::footer(&b).is_ok()) {
@@ -298,14 +294,10 @@ fn record_and_replay_round_trip_every_double_bit_for_bit() {
 
 #[test]
 fn a_recording_cut_by_sigkill_still_replays_and_plots() {
-    let d = Domain::unique("killed").unwrap();
-    let _leg = hold_sim(&d, "leg", 500.0, leg(500.0));
+    let (d, _leg) = domain_with_leg("killed", 500.0, leg);
     let dir = tempdir("killed");
     let file = dir.join("killed.mcap");
-    let mut cmd = conductor(&d);
-    cmd.args(["record", "leg/*", "--no-progress", "-o"])
-        .arg(&file);
-    let mut rec = Bg::spawn(&mut cmd);
+    let mut rec = Bg::spawn(&mut record(&d, &["leg/*"], &file));
     std::thread::sleep(Duration::from_millis(2600));
     rec.child.kill().unwrap(); // SIGKILL: no footer, no summary, an open chunk lost
     rec.child.wait().unwrap();
@@ -322,12 +314,7 @@ fn a_recording_cut_by_sigkill_still_replays_and_plots() {
     assert!(out.status.success(), "{stderr}");
     assert!(stderr.contains("ends early"), "{stderr}");
     // At least the chunks closed each second: 1 s of 3 states at 500 Hz.
-    let published: u64 = stderr
-        .split("replayed ")
-        .nth(1)
-        .and_then(|s| s.split(' ').next())
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{stderr}"));
+    let published: u64 = number_after(&stderr, "replayed ");
     assert!(published >= 3 * 450, "{stderr}");
 
     let png = dir.join("killed.png");
@@ -347,8 +334,7 @@ fn a_recording_cut_by_sigkill_still_replays_and_plots() {
 
 #[test]
 fn replay_into_a_domain_with_live_owners_names_them_and_the_way_out() {
-    let d = Domain::unique("clash").unwrap();
-    let _leg = hold_sim(&d, "leg", 200.0, leg(200.0));
+    let (d, _leg) = domain_with_leg("clash", 200.0, leg);
     let dir = tempdir("clash");
     let file = dir.join("leg.mcap");
     ok(conductor(&d)

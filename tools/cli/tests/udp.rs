@@ -56,8 +56,7 @@ fn gateway(d: &Domain, pattern: &str, base: u16) -> Bg {
 
 #[test]
 fn set_get_smp_info_give_the_documented_answers() {
-    let d = Domain::unique("udp").unwrap();
-    let _leg = hold_sim(&d, "leg", 200.0, leg(200.0));
+    let (d, _leg) = domain_with_leg("udp", 200.0, leg);
     let base = free_udp_ports(3);
     let mut gw = gateway(&d, "leg/*", base);
     let map = gw.until(Duration::from_secs(10), |l| l == "READY");
@@ -149,8 +148,7 @@ fn junk(i: u32, rng: &mut u64) -> Vec<u8> {
 
 #[test]
 fn ten_thousand_malformed_datagrams_get_err_and_the_gateway_keeps_serving() {
-    let d = Domain::unique("udpjunk").unwrap();
-    let _leg = hold_sim(&d, "leg", 200.0, leg(200.0));
+    let (d, _leg) = domain_with_leg("udpjunk", 200.0, leg);
     let base = free_udp_ports(3);
     let mut gw = gateway(&d, "leg/*", base);
     gw.until(Duration::from_secs(10), |l| l == "READY");

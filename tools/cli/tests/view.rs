@@ -9,6 +9,7 @@ use std::net::TcpStream;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{monotonic_ns, Domain};
+use conductor_testkit::json_strings;
 use serde_json::{json, Value};
 use support::*;
 use tungstenite::client::IntoClientRequest;
@@ -291,12 +292,7 @@ fn foxglove_sees_a_launched_robot_and_sets_through_the_checks_of_set() {
         Msg::Json(v) if v["op"] == "serverInfo" => Some(v.clone()),
         _ => None,
     });
-    let caps: Vec<&str> = info["capabilities"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|c| c.as_str().unwrap())
-        .collect();
+    let caps = json_strings(&info["capabilities"]);
     for c in ["clientPublish", "parameters", "parametersSubscribe"] {
         assert!(caps.contains(&c), "{info}");
     }

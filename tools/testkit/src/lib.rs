@@ -15,10 +15,13 @@
 //! * [`run_ok`] — running a program that must succeed, with its output in the failure message.
 //! * [`spawn_with_lines`], [`lines_of`] — a child's output lines on a channel, to wait for with
 //!   a timeout.
+//! * [`number_after`], [`json_strings`] — a figure, a list of names read out of a program's
+//!   report.
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::PathBuf;
 use std::process::{Child, Command, Output, Stdio};
+use std::str::FromStr;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -99,4 +102,24 @@ pub fn spawn_with_lines(cmd: &mut Command) -> (Child, mpsc::Receiver<String>) {
         .unwrap_or_else(|e| panic!("{cmd:?} did not start: {e}"));
     let lines = lines_of(child.stdout.take().expect("stdout is piped"));
     (child, lines)
+}
+
+/// The number that follows `marker` in `text` (a program's report, up to the next space),
+/// parsed; panics with the text when the marker or the number is missing.
+pub fn number_after<T: FromStr>(text: &str, marker: &str) -> T {
+    text.split(marker)
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no number after {marker:?} in: {text}"))
+}
+
+/// The strings of the JSON array `v` (a report's list of names); panics when `v` is not an
+/// array of strings.
+pub fn json_strings(v: &serde_json::Value) -> Vec<&str> {
+    v.as_array()
+        .unwrap_or_else(|| panic!("not an array: {v}"))
+        .iter()
+        .map(|x| x.as_str().unwrap_or_else(|| panic!("not a string: {x}")))
+        .collect()
 }

@@ -7,6 +7,11 @@ use score_core::{Engine, Num, Outcome};
 /// [`DummyHal`]'s peripherals beside named in-memory playback inputs and logs.
 pub type MemBoard = Board<DummyHal, MemFiles>;
 
+/// An empty engine and a fresh [`board`], as every test starts.
+pub fn engine_and_board() -> (Engine<Num>, MemBoard) {
+    (Engine::new(), board())
+}
+
 /// A test board: every ADC conversion reads 0 and every pin reads high (set `hw.adc_code`,
 /// `hw.pin_level` for others), no files yet.
 pub fn board() -> MemBoard {
@@ -103,6 +108,14 @@ pub fn refused(e: &mut Engine<Num>, hal: &mut MemBoard, line: &str) -> String {
         Ok(o) => panic!("{line}: not refused ({o:?})"),
         Err(err) => err.to_string(),
     }
+}
+
+/// [`refused`], and the table is as it was before the line.
+pub fn refused_unchanged(e: &mut Engine<Num>, hal: &mut MemBoard, line: &str) -> String {
+    let before = e.clone();
+    let err = refused(e, hal, line);
+    assert_eq!(*e, before, "{line}: refused, but the table changed");
+    err
 }
 
 /// Simulated time: runs every due update with deadline < `until_us`.

@@ -78,6 +78,28 @@ pub fn hold_sim(d: &Domain, subsystem: &str, rate: f64, states: Vec<StateSpec>) 
     .expect("simulator")
 }
 
+/// A fresh domain named after `tag`, with the simulated subsystem `leg` holding `states(rate)`
+/// at `rate` Hz in it (keep the handle: dropping it stops the simulator).
+pub fn domain_with_leg(
+    tag: &str,
+    rate: f64,
+    states: fn(f64) -> Vec<StateSpec>,
+) -> (Domain, SimHandle) {
+    let d = Domain::unique(tag).unwrap();
+    let sim = hold_sim(&d, "leg", rate, states(rate));
+    (d, sim)
+}
+
+/// `conductor record <args> --no-progress -o <file>` on `d`.
+pub fn record(d: &Domain, args: &[&str], file: &Path) -> Command {
+    let mut cmd = conductor(d);
+    cmd.arg("record")
+        .args(args)
+        .args(["--no-progress", "-o"])
+        .arg(file);
+    cmd
+}
+
 /// A child process killed (by its pid) when dropped, with its stdout lines on a channel.
 pub struct Bg {
     pub child: Child,
