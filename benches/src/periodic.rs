@@ -16,7 +16,8 @@
 //! * snapshot: one slice of `states` samples per tick, read at once (one receive time).
 //!
 //! The latency is receive time − the tick's wake-up time (the raw samples carry it as
-//! `t_sample_ns`), measured over the run after a half-second warm-up.
+//! `t_sample_ns`), measured over every tick after a half-second of warm-up ticks (counted by
+//! tick, so a late tick moves no sample in or out of the measurement).
 
 use std::ffi::OsString;
 use std::sync::atomic::AtomicBool;
@@ -34,11 +35,11 @@ use crate::pingpong::{
 use crate::Percentiles;
 
 /// The prefix of [`crate::pingpong::ROLE_ENV`] that makes a program this floor's reader:
-/// `"periodic <domain> <states> <snapshot 0|1> <avoid cpu>"`.
+/// `"periodic <domain> <states> <snapshot 0|1> <avoid cpu> <buffer> <warm-up ticks>"`.
 pub const ROLE: &str = "periodic ";
 
-/// Samples of the warm-up that the reader leaves out.
-const WARM_UP_NS: u64 = 500_000_000;
+/// The warm-up the reader leaves out (s), in ticks of the rate.
+const WARM_UP_S: f64 = 0.5;
 
 /// One floor run.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,8 +134,10 @@ fn publish(p: &Periodic, child_program: &[OsString]) -> Result<Percentiles, Ping
         .notifier_builder()
         .create()
         .map_err(|e| PingPongError::Iox(format!("notifier: {e}")))?;
+    let warm_up = (WARM_UP_S * p.rate_hz).ceil() as u64;
+    let measured = (p.seconds * p.rate_hz).ceil() as u64;
     let role = format!(
-        "{ROLE}{} {} {} {} {}",
+        "{ROLE}{} {} {} {} {} {warm_up}",
         d.name(),
         p.states,
         u8::from(p.snapshot),
@@ -148,7 +151,7 @@ fn publish(p: &Periodic, child_program: &[OsString]) -> Result<Percentiles, Ping
     let _ = rt::pin_to_cpu(p.cpu);
     let _ = rt::set_fifo(p.priority);
     let period = (1e9 / p.rate_hz) as u64;
-    let ticks = ((p.seconds + WARM_UP_NS as f64 * 1e-9) * p.rate_hz).ceil() as u64;
+    let ticks = warm_up + measured;
     let never = AtomicBool::new(false);
     let mut deadline = monotonic_ns() + period;
     let send = |seq: u64, t: u64| -> Result<(), PingPongError> {
@@ -198,17 +201,18 @@ fn publish(p: &Periodic, child_program: &[OsString]) -> Result<Percentiles, Ping
 pub fn child(args: &str) -> Result<(), PingPongError> {
     let bad = || {
         PingPongError::Child(format!(
-            "{ROLE}{args:?}: expected \"<domain> <states> <snapshot> <cpu> <buffer>\""
+            "{ROLE}{args:?}: expected \"<domain> <states> <snapshot> <cpu> <buffer> <warm-up>\""
         ))
     };
     let f: Vec<&str> = args.split_whitespace().collect();
-    let [domain, states, snapshot, cpu, buffer] = f[..] else {
+    let [domain, states, snapshot, cpu, buffer, warm_up] = f[..] else {
         return Err(bad());
     };
-    let (Ok(states), Ok(cpu), Ok(buffer)) = (
+    let (Ok(states), Ok(cpu), Ok(buffer), Ok(warm_up)) = (
         states.parse::<usize>(),
         cpu.parse::<usize>(),
         buffer.parse::<usize>(),
+        warm_up.parse::<u64>(),
     ) else {
         return Err(bad());
     };
@@ -223,14 +227,12 @@ pub fn child(args: &str) -> Result<(), PingPongError> {
         .create()
         .map_err(|e| PingPongError::Iox(format!("listener: {e}")))?;
     let mut lat = Vec::with_capacity(1 << 22);
-    let mut start = None;
-    // Records one sample read at `now`; false at the stop.
+    // Records one sample read at `now` (its `seq` is the tick); false at the stop.
     let mut record = |s: &StateSample, now: u64| -> bool {
         if s.t_sample_ns == 0 {
             return false;
         }
-        let t0 = *start.get_or_insert(s.t_sample_ns);
-        if s.t_sample_ns >= t0 + WARM_UP_NS {
+        if s.seq >= warm_up {
             lat.push(now.saturating_sub(s.t_sample_ns));
         }
         true
@@ -270,13 +272,14 @@ pub fn child(args: &str) -> Result<(), PingPongError> {
             })
             .collect::<Result<Vec<_>, _>>()?;
         println!("READY");
-        'states: loop {
+        // The stop reaches the first state's queue before the last tick's other states are
+        // read: finish the pass over every state, then stop.
+        let mut stopped = false;
+        while !stopped {
             wait("waiting")?;
             for sub in &subs {
                 while let Some(s) = sub.receive().map_err(|e| iox("receive")(e.to_string()))? {
-                    if !record(&s, monotonic_ns()) {
-                        break 'states;
-                    }
+                    stopped |= !record(&s, monotonic_ns());
                 }
             }
         }
