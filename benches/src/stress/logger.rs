@@ -205,8 +205,18 @@ impl Logger {
     ) -> Result<Self, conductor_bus::BusError> {
         let mut logger = Self::empty(sine);
         let mut subsystems: Vec<String> = Vec::new();
+        // One listing of the domain for every name (resolving each name alone lists the
+        // domain each time: minutes for 1 000 states).
+        let listed: HashMap<String, conductor_bus::StateInfo> = bus
+            .list_states()?
+            .into_iter()
+            .map(|s| (s.qualified_name(), s))
+            .collect();
         for n in names {
-            let info = bus.resolve(n)?;
+            let info = match listed.get(n) {
+                Some(i) => i.clone(),
+                None => bus.resolve(n)?,
+            };
             let reader = match subsystems.iter().position(|s| *s == info.subsystem) {
                 Some(r) => r,
                 None => {
