@@ -235,6 +235,10 @@ pub struct ScalingReport {
     pub history: usize,
     /// How the processes were placed.
     pub pinning: String,
+    /// How every reader took the states: `states` (a subscriber per state, woken by the tick
+    /// event) or `snapshot` (the subsystem's snapshot, woken by its event; a "subscriber per
+    /// state" is then a snapshot reader).
+    pub reader: String,
     /// Every measured point.
     pub points: Vec<ScalingPoint>,
     /// The three sweeps.
@@ -356,6 +360,13 @@ pub fn run(cfg: &Config, plan: &Plan) -> Result<ScalingReport, SuiteError> {
              deadlines; the logger and the other readers kept off CPU {} (the rest of the host)",
             cfg.priority, cfg.cpu, cfg.cpu
         ),
+        reader: cfg
+            .readers
+            .first()
+            .copied()
+            .unwrap_or(super::Reader::States)
+            .name()
+            .into(),
         points,
         sweeps,
         plots: plots_written,
@@ -539,9 +550,19 @@ impl ScalingReport {
             "Every point: the stress test at {} Hz, {} s logged; {}; state history and reader \
              buffers {} samples. Executor CPU per tick = the executors' on-CPU time over the \
              window (`/proc/<pid>/task/*/schedstat`) ÷ the ticks each executed. Sample → \
-             controller = the sample request's time → the logger process reading the sample, \
-             woken by the tick event.\n",
-            self.rate_hz, self.seconds, self.pinning, self.history
+             controller = the sample request's time → the logger process reading the sample. \
+             Reader: `{}` ({}).\n",
+            self.rate_hz,
+            self.seconds,
+            self.pinning,
+            self.history,
+            self.reader,
+            if self.reader == super::Reader::Snapshot.name() {
+                "every reader takes the subsystem's snapshot, woken by the snapshot event; the \
+                 \"subscribers per state\" are that many snapshot readers"
+            } else {
+                "every reader subscribes to each state, woken by the tick event"
+            }
         );
         for sw in &self.sweeps {
             let _ = writeln!(s, "## Against {} ({})\n", sw.name, sw.fixed);
