@@ -183,10 +183,12 @@ fn publish(p: &Periodic, child_program: &[OsString]) -> Result<Percentiles, Ping
         }
         deadline += period;
     }
-    // The stop: a sample stamped 0.
-    let stopped = send(u64::MAX, 0);
-    outcome?;
-    stopped?;
+    // The stop: a sample stamped 0. A reader that cannot be told to stop is killed.
+    if let Err(e) = outcome.and_then(|()| send(u64::MAX, 0)) {
+        let _ = child.kill();
+        let _ = child.wait();
+        return Err(e);
+    }
     let line = out
         .recv_timeout(Duration::from_secs(20))
         .map_err(|_| PingPongError::Child("no summary line".into()));
