@@ -7,6 +7,7 @@ use iceoryx2::port::listener::{ListenerCreateError, ListenerWaitError};
 use iceoryx2::port::notifier::{NotifierCreateError, NotifierNotifyError};
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
+use iceoryx2::port::update_connections::ConnectionFailure;
 use iceoryx2::port::{LoanError, ReceiveError, SendError};
 use iceoryx2::prelude::SemanticStringError;
 use iceoryx2::service::attribute::AttributeDefinitionError;
@@ -254,6 +255,9 @@ pub enum IceoryxError {
     /// Waiting on a listener.
     #[error(transparent)]
     ListenerWait(#[from] ListenerWaitError),
+    /// Connecting a port to a service's other ports.
+    #[error(transparent)]
+    Connection(#[from] ConnectionFailure),
 }
 
 fn hint(known: &[String]) -> String {

@@ -213,6 +213,22 @@ impl SnapshotReader {
         readers.iter_mut().try_for_each(SnapshotReader::consume)
     }
 
+    /// Whether a snapshot is queued, without taking it or touching the event: what a reader
+    /// that busy-polls checks (a shared-memory read, no system call), so it sees a snapshot as
+    /// soon as it is sent, before the owner's notification.
+    pub fn has_snapshots(&self) -> Result<bool> {
+        self.port
+            .has_samples()
+            .map_err(|e| BusError::iceoryx("checking for snapshots", e))
+    }
+
+    /// Consumes the notifications received so far without waiting, so that the event's
+    /// descriptor ([`raw_fd`](Self::raw_fd)) is readable again only for a later snapshot: for
+    /// readers that wait in their own event loop.
+    pub fn try_consume(&mut self) -> Result<()> {
+        self.consume()
+    }
+
     fn consume(&mut self) -> Result<()> {
         self.listener
             .try_wait(|_| {})

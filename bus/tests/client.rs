@@ -205,3 +205,40 @@ fn every_tick_leaves_one_snapshot_of_every_state() {
     assert_eq!(p.flush_states().published, 0);
     assert!(snaps.latest().unwrap().is_none());
 }
+
+/// A reader in its own event loop: `has_snapshots` sees a snapshot in shared memory without
+/// taking it, and `try_consume` leaves the event descriptor readable only for a later one.
+#[test]
+fn a_snapshot_is_seen_before_it_is_taken_and_its_event_consumed() {
+    use conductor_bus::SnapshotReader;
+
+    let readable = |fd: i32| {
+        let mut p = libc::pollfd {
+            fd,
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd, zero timeout.
+        unsafe { libc::poll(&mut p, 1, 0) == 1 }
+    };
+    let d = Domain::unique("snapfd").unwrap();
+    let bus = Bus::open(&d, "t").unwrap();
+    let (mut p, _rx) = owner(&bus, &["a"]);
+    let mut snaps = SnapshotReader::with_buffer(&bus, "sys", 8).unwrap();
+    assert!(!snaps.has_snapshots().unwrap());
+    assert!(!readable(snaps.raw_fd()));
+
+    p.publish(0, 1, 1_000, 0.5, 0).unwrap();
+    p.notify_tick().unwrap();
+    assert!(snaps.has_snapshots().unwrap());
+    assert!(snaps.has_snapshots().unwrap(), "looking does not take it");
+    assert!(readable(snaps.raw_fd()));
+    snaps.try_consume().unwrap();
+    assert!(!readable(snaps.raw_fd()), "consumed");
+    assert!(
+        snaps.has_snapshots().unwrap(),
+        "consuming the event leaves the snapshot"
+    );
+    assert_eq!(snaps.receive().unwrap().expect("tick 1")[0].value, 0.5);
+    assert!(!snaps.has_snapshots().unwrap());
+}

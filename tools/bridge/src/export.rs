@@ -4,10 +4,12 @@
 //! tick events of every exported subsystem (any number of them) and a wake-up descriptor that
 //! Zenoh's callback signals when a remote command frame arrives, so a tick's samples leave right
 //! after the tick and a command reaches its executor right after it arrives, with no polling
-//! interval in between. Per subsystem it drains the exported states' subscriptions and puts
-//! **one** Zenoh message per tick on `conductor/<domain>/<subsystem>` carrying every exported
-//! state that has a sample of that tick (or, with `rate_hz`, the newest samples when due), built
-//! in a buffer reused from tick to tick. It never writes into an executor's memory except
+//! interval in between. Per subsystem it reads the owner's snapshot (`conductor/<subsystem>/
+//! snapshot`: the whole tick in one sample, sent before the per-state samples) and puts **one**
+//! Zenoh message per tick on `conductor/<domain>/<subsystem>` carrying every exported state that
+//! has a new sample in it (or, with `rate_hz`, the newest samples when due), built in a buffer
+//! reused from tick to tick. An owner without a snapshot (a foreign one of ABI 2 before the
+//! snapshot) is read state by state and woken by its tick event instead. It never writes into an executor's memory except
 //! through the ordinary command service, and an executor never waits for it: it reads the same
 //! shared-memory samples any local subscriber reads.
 
@@ -17,7 +19,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use conductor_bus::{
-    monotonic_ns, Bus, CommandFrame, CommandSender, StateSample, StateSubscriber, TickWaiter,
+    monotonic_ns, Bus, CommandFrame, CommandSender, SnapshotReader, StateSample, StateSubscriber,
+    TickWaiter,
 };
 use tracing::{info, warn};
 use zenoh::qos::{CongestionControl, Priority};
@@ -38,11 +41,55 @@ pub(crate) const RESCAN: Duration = Duration::from_secs(1);
 
 struct Exported {
     name: String,
-    sub: StateSubscriber,
+    /// Its own subscription, when its owner has no snapshot.
+    sub: Option<StateSubscriber>,
     /// The next sample not yet sent: of a later tick than the message being built, or (with
     /// `rate_hz`) the newest one until the next message is due.
     pending: Option<StateSample>,
+    /// `seq` of the last sample taken from a snapshot (a slower state's entry repeats it).
+    last_seq: u64,
     entry: CatalogEntry,
+}
+
+/// Where a subsystem's samples are read.
+enum Source {
+    /// The owner's snapshot, woken by its event: one receive per tick, whatever the number of
+    /// states.
+    Snapshot(SnapshotReader),
+    /// One subscription per state, woken by the tick event (`None`: no tick event either, so
+    /// polled every [`POLL`]).
+    States(Option<TickWaiter>),
+}
+
+impl Source {
+    /// The descriptor that wakes the thread for this subsystem.
+    fn raw_fd(&self) -> Option<i32> {
+        match self {
+            Source::Snapshot(r) => Some(r.raw_fd()),
+            Source::States(w) => w.as_ref().map(TickWaiter::raw_fd),
+        }
+    }
+
+    /// The next snapshot (`None` for per-state reading).
+    fn snapshot(&mut self) -> Result<Option<conductor_bus::Snapshot>> {
+        match self {
+            Source::Snapshot(r) => Ok(r.receive()?),
+            Source::States(_) => Ok(None),
+        }
+    }
+
+    /// Consumes the notifications received so far.
+    fn consume(&mut self) -> Result<()> {
+        match self {
+            Source::Snapshot(r) => r.try_consume()?,
+            Source::States(w) => {
+                if let Some(w) = w {
+                    w.try_consume()?;
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The exported states of one subsystem: one Zenoh publisher, one message per tick.
@@ -56,11 +103,12 @@ struct Group {
     buf: Vec<u8>,
     /// Envelope bytes: the sequence number is rewritten in place per message.
     envelope: Vec<u8>,
-    /// Woken by the owner's tick; `None` if the subsystem has no tick event (then the
-    /// thread's timeout bounds the delay).
-    waiter: Option<TickWaiter>,
-    /// When its tick event last woke the thread, and the tick period seen (for the spin).
+    source: Source,
+    /// When its tick last woke the thread, and the tick period seen (for the spin).
     cadence: Cadence,
+    /// The spin saw this tick's snapshot before its notification, which is still to come and
+    /// is not another tick.
+    ahead: bool,
 }
 
 /// What one `poll(2)` of the export thread saw.
@@ -242,7 +290,7 @@ impl Exporter {
     /// Whether something exported has no event to wake the thread (a rate-limited export, or
     /// a subsystem without a tick event), so the thread must wake every [`POLL`].
     pub(crate) fn needs_polling(&self) -> bool {
-        self.rate_hz.is_some() || self.groups.iter().any(|g| g.waiter.is_none())
+        self.rate_hz.is_some() || self.groups.iter().any(|g| g.source.raw_fd().is_none())
     }
 
     /// The key-expression domain.
@@ -283,11 +331,6 @@ impl Exporter {
             {
                 continue;
             }
-            let sub = match StateSubscriber::from_info(&self.bus, s.clone(), 64) {
-                Ok(sub) => sub,
-                // It vanished between listing and opening: the next rescan tries again.
-                Err(_) => continue,
-            };
             let m = &s.meta;
             let remote_cmd = m.writable && any_matches(&self.commands_sel, &s.subsystem, &s.name);
             let entry = CatalogEntry {
@@ -308,10 +351,19 @@ impl Exporter {
                     self.groups.len() - 1
                 }
             };
+            let sub = match &self.groups[gi].source {
+                Source::Snapshot(_) => None,
+                Source::States(_) => match StateSubscriber::from_info(&self.bus, s.clone(), 64) {
+                    Ok(sub) => Some(sub),
+                    // It vanished between listing and opening: the next rescan tries again.
+                    Err(_) => continue,
+                },
+            };
             self.groups[gi].states.push(Exported {
                 name: s.name.clone(),
                 sub,
                 pending: None,
+                last_seq: 0,
                 entry,
             });
             added += 1;
@@ -334,7 +386,10 @@ impl Exporter {
                     .flat_map(|g| &g.states)
                     .filter(|e| e.entry.writable)
                     .count(),
-                self.groups.iter().filter(|g| g.waiter.is_some()).count()
+                self.groups
+                    .iter()
+                    .filter(|g| g.source.raw_fd().is_some())
+                    .count()
             );
         }
         Ok(())
@@ -350,11 +405,22 @@ impl Exporter {
             .express(true)
             .wait()
             .map_err(zenoh("declaring a subsystem's publisher"))?;
-        let waiter = match TickWaiter::new(&self.bus, subsystem) {
-            Ok(w) => Some(w),
+        // The whole tick in one sample, sent before the per-state ones; a queue as deep as a
+        // state's, so a late thread still sends every tick.
+        let source = match SnapshotReader::with_buffer(&self.bus, subsystem, 64) {
+            Ok(r) => Source::Snapshot(r),
             Err(e) => {
-                warn!("no tick event for {subsystem} ({e}): its states are polled every {POLL:?}");
-                None
+                info!("no snapshot for {subsystem} ({e}): reading its states one by one");
+                Source::States(match TickWaiter::new(&self.bus, subsystem) {
+                    Ok(w) => Some(w),
+                    Err(e) => {
+                        warn!(
+                            "no tick event for {subsystem} ({e}): its states are polled every \
+                             {POLL:?}"
+                        );
+                        None
+                    }
+                })
             }
         };
         Ok(Group {
@@ -370,8 +436,9 @@ impl Exporter {
                 seq: 0,
             }
             .encode(),
-            waiter,
+            source,
             cadence: Cadence::default(),
+            ahead: false,
         })
     }
 
@@ -385,8 +452,8 @@ impl Exporter {
         self.fd_group.clear();
         self.fds.push(fd(self.wake.fd()));
         for (gi, g) in self.groups.iter().enumerate() {
-            if let Some(w) = &g.waiter {
-                self.fds.push(fd(w.raw_fd()));
+            if let Some(f) = g.source.raw_fd() {
+                self.fds.push(fd(f));
                 self.fd_group.push(gi);
             }
         }
@@ -458,7 +525,7 @@ impl Exporter {
             }
             let spin_start = Instant::now();
             while Instant::now() < until {
-                if self.poll_fds(Some(Duration::ZERO))?.any {
+                if self.snapshot_sent()? || self.poll_fds(Some(Duration::ZERO))?.any {
                     let now = Instant::now();
                     if let Some(sp) = &mut self.spin {
                         sp.caught += 1;
@@ -489,7 +556,7 @@ impl Exporter {
         let sp = self.spin?;
         self.groups
             .iter()
-            .filter(|g| g.waiter.is_some())
+            .filter(|g| g.source.raw_fd().is_some())
             .filter_map(|g| g.cadence.next())
             .map(|due| {
                 let from = due.checked_sub(sp.lead).unwrap_or(due);
@@ -545,15 +612,33 @@ impl Exporter {
         }
         for (p, &gi) in self.fds[1..].iter().zip(&self.fd_group) {
             if p.revents != 0 {
-                fired.tick = true;
                 let g = &mut self.groups[gi];
-                g.cadence.ticked(now);
-                if let Some(w) = &mut g.waiter {
-                    w.try_consume()?;
+                g.source.consume()?;
+                if !std::mem::take(&mut g.ahead) {
+                    fired.tick = true;
+                    g.cadence.ticked(now);
                 }
             }
         }
         Ok(fired)
+    }
+
+    /// Whether an owner has sent a snapshot not yet read, seen in shared memory before its
+    /// notification (the spin's check: no system call, and it does not wait for the owner's
+    /// `notify`). Notes the tick of each.
+    fn snapshot_sent(&mut self) -> Result<bool> {
+        let mut any = false;
+        let now = Instant::now();
+        for g in &mut self.groups {
+            if let Source::Snapshot(r) = &g.source {
+                if !g.ahead && r.has_snapshots()? {
+                    g.ahead = true;
+                    g.cadence.ticked(now);
+                    any = true;
+                }
+            }
+        }
+        Ok(any)
     }
 
     /// What the spin did: ticks caught while spinning, ticks before / after the window, time
@@ -577,13 +662,42 @@ impl Exporter {
         let now = Instant::now();
         let period = self.rate_hz.map(|r| Duration::from_secs_f64(1.0 / r));
         for g in &mut self.groups {
+            if matches!(g.source, Source::Snapshot(_)) {
+                while let Some(snap) = g.source.snapshot()? {
+                    let mut any = false;
+                    for e in &mut g.states {
+                        // A slower state's entry repeats its last sample; a state never
+                        // published yet has no time.
+                        if let Some(&x) = snap.get(e.entry.index as usize) {
+                            if x.seq != e.last_seq && x.t_sample_ns != 0 {
+                                e.last_seq = x.seq;
+                                e.pending = Some(x);
+                                any = true;
+                            }
+                        }
+                    }
+                    drop(snap);
+                    if any && period.is_none() {
+                        g.send(|e| e.pending.is_some(), &self.counters)?;
+                    }
+                }
+                if let Some(p) = period {
+                    if now >= g.next_due && g.states.iter().any(|e| e.pending.is_some()) {
+                        g.send(|e| e.pending.is_some(), &self.counters)?;
+                        g.next_due = (g.next_due + p).max(now);
+                    }
+                }
+                continue;
+            }
             match period {
                 None => loop {
                     // The oldest tick any state has a sample of goes first, alone.
                     let mut tick = None::<u64>;
                     for e in &mut g.states {
                         if e.pending.is_none() {
-                            e.pending = e.sub.receive()?;
+                            if let Some(sub) = &mut e.sub {
+                                e.pending = sub.receive()?;
+                            }
                         }
                         if let Some(p) = &e.pending {
                             tick = Some(tick.map_or(p.tick, |t| t.min(p.tick)));
@@ -596,9 +710,12 @@ impl Exporter {
                     )?;
                 },
                 Some(p) => {
-                    for e in &mut g.states {
-                        while let Some(s) = e.sub.receive()? {
-                            e.pending = Some(s);
+                    for e in g.states.iter_mut().filter_map(|e| {
+                        let sub = e.sub.as_mut()?;
+                        Some((sub, &mut e.pending))
+                    }) {
+                        while let Some(s) = e.0.receive()? {
+                            *e.1 = Some(s);
                         }
                     }
                     if now >= g.next_due && g.states.iter().any(|e| e.pending.is_some()) {

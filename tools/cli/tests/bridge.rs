@@ -1146,3 +1146,145 @@ fn through_a_zenoh_router_with_bridges_in_client_mode() {
     exporter.stop();
     router.close().wait().unwrap();
 }
+
+/// An owner written to ABI 2 before the snapshot existed publishes its states and its tick event
+/// and no `snapshot` service (made here with iceoryx2 directly, from bus/ABI.md). The exporting
+/// bridge reads such an owner state by state, woken by its tick: every sample crosses once, in
+/// order, with the owner's timestamps.
+#[test]
+fn an_owner_without_a_snapshot_is_read_state_by_state() {
+    use conductor_bus::metadata::{
+        KEY_ABI, KEY_INDEX, KEY_KIND, KEY_LIMITS, KEY_RATE, KEY_WRITABLE,
+    };
+    use conductor_bus::qos;
+    use iceoryx2::prelude::*;
+    use iceoryx2::service::attribute::AttributeSpecifier;
+
+    let _one = ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+    let a = Domain::unique("brfoa").unwrap();
+    let b = Domain::unique("brfob").unwrap();
+    let port = free_tcp_ports(2);
+    let link = Link::Loopback { port };
+    let attr = |s: AttributeSpecifier, k: &str, v: &str| {
+        s.define(&k.try_into().unwrap(), &v.try_into().unwrap())
+            .unwrap()
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let (ready_tx, ready) = mpsc::channel();
+    let owner = {
+        let (a, stop) = (a.clone(), stop.clone());
+        std::thread::spawn(move || {
+            let node = NodeBuilder::new()
+                .config(a.iceoryx2_config())
+                .create::<ipc::Service>()
+                .unwrap();
+            let base = |kind| {
+                attr(
+                    attr(AttributeSpecifier::new(), KEY_ABI, "2"),
+                    KEY_KIND,
+                    kind,
+                )
+            };
+            let mut spec = base("state");
+            for (k, v) in [
+                (KEY_INDEX, "0"),
+                (KEY_WRITABLE, "false"),
+                (KEY_RATE, "100"),
+                (KEY_LIMITS, "-inf,inf"),
+            ] {
+                spec = attr(spec, k, v);
+            }
+            let state = qos::state_service(
+                node.service_builder(&"conductor/fo/x".try_into().unwrap())
+                    .publish_subscribe::<StateSample>(),
+                16,
+            )
+            .create_with_attributes(&spec)
+            .unwrap();
+            let tick = qos::tick_event(
+                node.service_builder(&"conductor/fo/tick".try_into().unwrap())
+                    .event(),
+            )
+            .create_with_attributes(&base("tick"))
+            .unwrap();
+            let publisher = state.publisher_builder().create().unwrap();
+            let notifier = tick.notifier_builder().create().unwrap();
+            ready_tx.send(()).unwrap();
+            let mut seq = 0u64;
+            while !stop.load(Ordering::Relaxed) {
+                seq += 1;
+                let t = conductor_bus::monotonic_ns();
+                publisher
+                    .send_copy(StateSample {
+                        seq,
+                        tick: seq,
+                        t_sample_ns: t,
+                        t_publish_ns: t,
+                        value: seq as f64,
+                        status: 0,
+                        reserved: 0,
+                    })
+                    .unwrap();
+                notifier.notify().unwrap();
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        })
+    };
+    ready
+        .recv_timeout(PATIENCE)
+        .expect("the foreign owner started");
+    let bus_a = Bus::open(&a, "test-a").unwrap();
+    let bus_b = Bus::open(&b, "test-b").unwrap();
+    wait_listed(&bus_a, "fo/x", PATIENCE);
+
+    let mut ex = link.conductor(0, &a);
+    ex.args([
+        "bridge",
+        "--host",
+        "hostfo",
+        "--listen",
+        &link.endpoint(0),
+        "--export",
+        "fo/*",
+    ]);
+    let exporter = Proc::spawn(&mut ex);
+    exporter.wait_line("ready bridge hostfo: exporting 1 state(s)", PATIENCE);
+    let importer = Proc::spawn(link.conductor(1, &b).args(importer_args(
+        "hostfb",
+        &[
+            "--connect",
+            &link.endpoint(0),
+            "--listen",
+            &link.endpoint(1),
+        ],
+        &a,
+    )));
+    importer.wait_line("ready bridge hostfb", PATIENCE);
+    wait_listed(&bus_b, "fo/x", PATIENCE);
+    let mut mirror = StateSubscriber::with_buffer(&bus_b, "fo/x", 256).unwrap();
+    let mut got = Vec::new();
+    let end = Instant::now() + PATIENCE;
+    while got.len() < 50 {
+        assert!(Instant::now() < end, "only {} samples crossed", got.len());
+        while let Some(s) = mirror.receive().unwrap() {
+            if s.status & status::STALE == 0 {
+                got.push(s);
+            }
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    stop.store(true, Ordering::Relaxed);
+    owner.join().unwrap();
+    let log = exporter.stop();
+    importer.stop();
+    assert!(
+        log.contains("no snapshot for fo") && log.contains("reading its states one by one"),
+        "{log}"
+    );
+    // The owner's value is its seq: each crossed once, in order, none lost in between (the
+    // history sample the mirror started from aside).
+    for w in got.windows(2) {
+        assert_eq!(w[1].value, w[0].value + 1.0, "{:?} then {:?}", w[0], w[1]);
+        assert!(w[1].t_sample_ns > w[0].t_sample_ns);
+    }
+}
