@@ -7,12 +7,14 @@
 //!    mirror in domain B (through both bridges), beside the same subscriber on A's local bus,
 //!    and beside raw Zenoh pub/sub of the same message between the two namespaces (helper
 //!    processes `conductor __bridge-bench zpub|zsub`): a one-entry tick message with its envelope,
-//!    put with the bridge's publisher settings (congestion drop, express), received in a callback.
-//!    The bridge is read twice: by one thread busy-polling both subscribers (as in earlier runs;
-//!    that thread holds a CPU the raw Zenoh run does not lose), then by one thread per side woken
-//!    by the subsystem's tick event, as a controller reads, noting also when the mirror's sample
-//!    was on B's bus (its `t_publish_ns`, stamped by the importing bridge as it publishes): the
-//!    span raw Zenoh's callback measures, from the sample's time to the subscriber having it;
+//!    put with the bridge's publisher settings (congestion drop, express). Each way of reading
+//!    the bridge has its raw Zenoh counterpart, so that a ratio compares two paths and not two
+//!    wake-up patterns: the mirror's sample on B's bus (its `t_publish_ns`, stamped in the
+//!    importing bridge's Zenoh callback) against raw Zenoh read in its callback; a thread woken
+//!    by the mirror's tick event (as a controller reads) against a thread woken by Zenoh's
+//!    default FIFO-channel handler; a thread busy-polling the mirror against one busy-polling
+//!    that channel. The woken readers of A's and B's bus run one after the other, so that A's
+//!    does not take a CPU from the exporting bridge at the tick it measures;
 //! 2. load, `--bridge-states` states at `--bridge-rate` Hz for `--seconds`: CPU % of each bridge
 //!    process and the samples that never reached B (drops).
 //!
@@ -291,6 +293,64 @@ fn woken_reader(
     })
 }
 
+/// How the raw Zenoh subscriber takes its samples.
+#[derive(Debug, Clone, Copy)]
+enum RawMode {
+    /// In the subscriber's callback, on Zenoh's own thread.
+    Callback,
+    /// An application thread blocked on Zenoh's default handler (a FIFO channel).
+    Woken,
+    /// An application thread busy-polling that channel (yielding when it is empty).
+    Poll,
+}
+
+impl RawMode {
+    fn arg(self) -> &'static str {
+        match self {
+            RawMode::Callback => "callback",
+            RawMode::Woken => "woken",
+            RawMode::Poll => "poll",
+        }
+    }
+}
+
+/// Raw Zenoh pub/sub of the bridge's one-state message between the two sides, read `mode`'s way:
+/// latency p50/p99 (µs) from the sample's time.
+fn raw_zenoh(sides: &Sides, o: &Options, mode: RawMode) -> Result<(f64, f64)> {
+    let n = o.latency_samples;
+    let mut sub = sides.command(1)?;
+    sub.args(["__bridge-bench", "zsub", "--count"])
+        .arg(n.to_string())
+        .arg("--endpoint")
+        .arg(sides.endpoint(1))
+        .args(["--mode", mode.arg()]);
+    let sub = Helper::spawn(sub)?;
+    sub.line("ready", Duration::from_secs(30))?;
+    let mut publ = sides.command(0)?;
+    publ.args(["__bridge-bench", "zpub", "--count"])
+        .arg((n + n / 10 + 50).to_string())
+        .arg("--rate")
+        .arg(o.latency_hz.to_string())
+        .arg("--endpoint")
+        .arg(sides.endpoint(1));
+    let publ = Helper::spawn(publ)?;
+    let line = sub.line(
+        "latency",
+        Duration::from_secs_f64(60.0 + 3.0 * n as f64 / o.latency_hz),
+    )?;
+    publ.stop();
+    sub.stop();
+    let nums: Vec<f64> = line
+        .split_whitespace()
+        .skip(1)
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    Ok((
+        nums.first().copied().unwrap_or(f64::NAN),
+        nums.get(1).copied().unwrap_or(f64::NAN),
+    ))
+}
+
 /// The figures of one run.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Report {
@@ -304,8 +364,14 @@ pub struct Report {
     pub deep_idle_off: bool,
     /// Latency p50/p99 (µs), the bench's thread busy-polling: local bus.
     pub local_us: (f64, f64),
-    /// Raw Zenoh pub/sub over the link.
+    /// Raw Zenoh pub/sub over the link, read in the subscriber's callback (on Zenoh's thread).
     pub zenoh_us: (f64, f64),
+    /// The same, read by an application thread woken by Zenoh's default (FIFO channel)
+    /// handler: the counterpart of a reader woken by the mirror's tick.
+    pub zenoh_woken_us: (f64, f64),
+    /// The same, read by an application thread busy-polling that channel: the counterpart of a
+    /// reader busy-polling the mirror.
+    pub zenoh_poll_us: (f64, f64),
     /// Through both bridges, the bench's thread busy-polling the mirror.
     pub bridge_us: (f64, f64),
     /// Local bus, read by a thread woken by the tick event.
@@ -335,14 +401,16 @@ pub struct Report {
 impl Report {
     /// A Markdown section.
     pub fn markdown(&self) -> String {
-        let row = |name: &str, v: (f64, f64)| {
+        let row = |name: &str, v: (f64, f64), raw: Option<(f64, f64)>| {
             let r = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+            let same = raw.map_or("".to_string(), |raw| {
+                format!("{:.2}× / {:.2}×", r(v.0, raw.0), r(v.1, raw.1))
+            });
             format!(
-                "| {name} | {:.1} | {:.1} | {:.2}× | {:.2}× |\n",
+                "| {name} | {:.1} | {:.1} | {:.2}× | {same} |\n",
                 v.0,
                 v.1,
                 r(v.0, self.zenoh_us.0),
-                r(v.1, self.zenoh_us.1)
             )
         };
         let spin = self
@@ -355,20 +423,37 @@ impl Report {
         };
         format!(
             "### Bridge ({link}; export spin {spin}; {idle})\n\n\
-             | path | p50 µs | p99 µs | p50 vs raw Zenoh | p99 vs raw Zenoh |\n|---|---|---|---|---|\n\
-             {}{}{}{}{}{}\n\
-             The goal (≤ 1.2× at p50) compares \"bridge: on B's bus\" with raw Zenoh: both from the \
-             sample's time to the subscriber having it. While one state crossed (woken readers): \
-             exporting bridge {:.1} % CPU, importing bridge {:.1} % CPU.\n\n\
+             | path | p50 µs | p99 µs | p50 vs raw Zenoh (callback) | p50 / p99 vs raw Zenoh read \
+             the same way |\n|---|---|---|---|---|\n\
+             {}{}{}{}{}{}{}{}\n\
+             The goal (≤ 1.2× at p50) compares each bridge row with raw Zenoh read the same way: \
+             \"on B's bus\" (the mirror sample's `t_publish_ns`, stamped in the importing bridge's \
+             Zenoh callback) with the callback, a woken reader with a woken reader, a busy-polling \
+             reader with a busy-polling reader; all from the sample's time. While one state \
+             crossed (woken readers): exporting bridge {:.1} % CPU, importing bridge {:.1} % CPU.\n\n\
              Load: {} states at {} Hz for {} s (publisher reached {:.0} ticks/s): exporting bridge \
              {:.1} % CPU, importing bridge {:.1} % CPU; {} of {} samples reached B ({} dropped, \
              {:.3} %); {} samples marked STALE.\n",
-            row("raw Zenoh pub/sub (callback)", self.zenoh_us),
-            row("bridge: on B's bus (mirror `t_publish_ns`)", self.bridge_on_bus_us),
-            row("bridge: reader on B woken by the mirror's tick", self.bridge_woken_us),
-            row("bridge: reader on B busy-polling (earlier runs' method)", self.bridge_us),
-            row("local bus: reader woken by the tick", self.local_woken_us),
-            row("local bus: reader busy-polling", self.local_us),
+            row("raw Zenoh pub/sub: callback", self.zenoh_us, None),
+            row("raw Zenoh pub/sub: reader woken by the channel", self.zenoh_woken_us, None),
+            row("raw Zenoh pub/sub: reader busy-polling the channel", self.zenoh_poll_us, None),
+            row(
+                "bridge: on B's bus (mirror `t_publish_ns`)",
+                self.bridge_on_bus_us,
+                Some(self.zenoh_us)
+            ),
+            row(
+                "bridge: reader on B woken by the mirror's tick",
+                self.bridge_woken_us,
+                Some(self.zenoh_woken_us)
+            ),
+            row(
+                "bridge: reader on B busy-polling",
+                self.bridge_us,
+                Some(self.zenoh_poll_us)
+            ),
+            row("local bus: reader woken by the tick", self.local_woken_us, None),
+            row("local bus: reader busy-polling", self.local_us, None),
             self.latency_cpu_percent.0,
             self.latency_cpu_percent.1,
             self.load.0,
@@ -416,38 +501,11 @@ pub fn run(o: &Options) -> Result<Report> {
     };
     let sides = Sides { netns, port };
 
-    // 1. Raw Zenoh between the two sides.
+    // 1. Raw Zenoh between the two sides, received the three ways the bridge path is read.
     let n = o.latency_samples;
-    let mut sub = sides.command(1)?;
-    sub.args(["__bridge-bench", "zsub", "--count"])
-        .arg(n.to_string())
-        .arg("--endpoint")
-        .arg(sides.endpoint(1));
-    let sub = Helper::spawn(sub)?;
-    sub.line("ready", Duration::from_secs(30))?;
-    let mut publ = sides.command(0)?;
-    publ.args(["__bridge-bench", "zpub", "--count"])
-        .arg((n + n / 10 + 50).to_string())
-        .arg("--rate")
-        .arg(o.latency_hz.to_string())
-        .arg("--endpoint")
-        .arg(sides.endpoint(1));
-    let publ = Helper::spawn(publ)?;
-    let line = sub.line(
-        "latency",
-        Duration::from_secs_f64(60.0 + 3.0 * n as f64 / o.latency_hz),
-    )?;
-    publ.stop();
-    sub.stop();
-    let nums: Vec<f64> = line
-        .split_whitespace()
-        .skip(1)
-        .filter_map(|w| w.parse().ok())
-        .collect();
-    let zenoh_us = (
-        nums.first().copied().unwrap_or(f64::NAN),
-        nums.get(1).copied().unwrap_or(f64::NAN),
-    );
+    let zenoh_us = raw_zenoh(&sides, o, RawMode::Callback)?;
+    let zenoh_woken_us = raw_zenoh(&sides, o, RawMode::Woken)?;
+    let zenoh_poll_us = raw_zenoh(&sides, o, RawMode::Poll)?;
 
     // 2. Through the bridges, beside the local bus.
     let a = Domain::unique("bbench-a")?;
@@ -588,6 +646,8 @@ pub fn run(o: &Options) -> Result<Report> {
         deep_idle_off,
         local_us,
         zenoh_us,
+        zenoh_woken_us,
+        zenoh_poll_us,
         bridge_us,
         local_woken_us,
         bridge_on_bus_us,
@@ -633,32 +693,68 @@ pub fn helper(args: &[std::ffi::OsString]) -> Result<()> {
     match role.as_str() {
         "zsub" => {
             set(&mut cfg, "listen/endpoints", &format!("[\"{endpoint}\"]"))?;
+            let mode = get("--mode").unwrap_or_else(|_| "callback".into());
             let z = zenoh::open(cfg).wait().map_err(|e| err(e.to_string()))?;
-            let (tx, rx) = std::sync::mpsc::channel::<u64>();
-            let _s = z
-                .declare_subscriber(key)
-                .callback(move |s| {
-                    let now = monotonic_ns();
-                    let b = s.payload().to_bytes();
-                    if let Some((_, x)) = conductor_bridge::wire::decode_tick(&b)
-                        .ok()
-                        .and_then(|mut e| e.next())
-                    {
-                        let _ = tx.send(now.saturating_sub(x.t_sample_ns));
-                    }
-                })
-                .wait()
-                .map_err(|e| err(e.to_string()))?;
-            println!("ready");
+            let age = |now: u64, s: &zenoh::sample::Sample| {
+                let b = s.payload().to_bytes();
+                conductor_bridge::wire::decode_tick(&b)
+                    .ok()
+                    .and_then(|mut e| e.next())
+                    .map(|(_, x)| now.saturating_sub(x.t_sample_ns))
+            };
             let mut v = Vec::with_capacity(count);
             // Skip the first samples (connection set-up).
-            let mut skip = 20;
-            while v.len() < count {
-                match rx.recv_timeout(Duration::from_secs(60)) {
-                    Ok(_) if skip > 0 => skip -= 1,
-                    Ok(ns) => v.push(ns),
-                    Err(_) => break,
+            let mut skip = 20u32;
+            let keep = |v: &mut Vec<u64>, skip: &mut u32, ns: Option<u64>| match ns {
+                Some(_) if *skip > 0 => *skip -= 1,
+                Some(ns) => v.push(ns),
+                None => {}
+            };
+            let wait = Duration::from_secs(60);
+            match mode.as_str() {
+                "callback" => {
+                    let (tx, rx) = std::sync::mpsc::channel::<u64>();
+                    let _s = z
+                        .declare_subscriber(key)
+                        .callback(move |s| {
+                            if let Some(ns) = age(monotonic_ns(), &s) {
+                                let _ = tx.send(ns);
+                            }
+                        })
+                        .wait()
+                        .map_err(|e| err(e.to_string()))?;
+                    println!("ready");
+                    while v.len() < count {
+                        match rx.recv_timeout(wait) {
+                            Ok(ns) => keep(&mut v, &mut skip, Some(ns)),
+                            Err(_) => break,
+                        }
+                    }
                 }
+                "woken" | "poll" => {
+                    // Zenoh's default handler: a FIFO channel an application thread reads.
+                    let s = z
+                        .declare_subscriber(key)
+                        .wait()
+                        .map_err(|e| err(e.to_string()))?;
+                    println!("ready");
+                    let end = Instant::now() + wait;
+                    while v.len() < count && Instant::now() < end {
+                        if mode == "woken" {
+                            match s.recv_timeout(wait) {
+                                Ok(Some(x)) => keep(&mut v, &mut skip, age(monotonic_ns(), &x)),
+                                _ => break,
+                            }
+                        } else {
+                            match s.try_recv() {
+                                Ok(Some(x)) => keep(&mut v, &mut skip, age(monotonic_ns(), &x)),
+                                Ok(None) => std::thread::yield_now(),
+                                Err(_) => break,
+                            }
+                        }
+                    }
+                }
+                other => return Err(err(format!("unknown --mode {other:?}"))),
             }
             println!(
                 "latency {} {} {}",
