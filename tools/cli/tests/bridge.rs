@@ -388,6 +388,23 @@ fn importer_args(host: &str, link: &[&str], from: &Domain) -> Vec<String> {
     v
 }
 
+/// Starts the importing bridge `host` in domain `b` (side 1 of `link`), dialling side 0 and
+/// importing domain `from`; returns once it is ready.
+fn start_importer(link: &Link, b: &Domain, host: &str, from: &Domain) -> Proc {
+    let link_args = [
+        "--connect",
+        &link.endpoint(0),
+        "--listen",
+        &link.endpoint(1),
+    ];
+    let importer = Proc::spawn(
+        link.conductor(1, b)
+            .args(importer_args(host, &link_args, from)),
+    );
+    importer.wait_line(&format!("ready bridge {host}"), Duration::from_secs(30));
+    importer
+}
+
 /// The scenarios run one at a time: their timing bounds assume the machine is not running two.
 static ONE_AT_A_TIME: Mutex<()> = Mutex::new(());
 
@@ -413,17 +430,7 @@ fn scenario(link: Link, tag: &str, inject: bool, spin_us: Option<u64>) {
         "ready bridge hosta: exporting 2 state(s)",
         Duration::from_secs(30),
     );
-    let importer = Proc::spawn(link.conductor(1, &b).args(importer_args(
-        "hostb",
-        &[
-            "--connect",
-            &link.endpoint(0),
-            "--listen",
-            &link.endpoint(1),
-        ],
-        &a,
-    )));
-    importer.wait_line("ready bridge hostb", Duration::from_secs(30));
+    let importer = start_importer(&link, &b, "hostb", &a);
 
     // Discovery: the mirrors exist in B, owned by host a.
     wait_listed(&bus_b, "leg/knee", Duration::from_secs(20));
@@ -1249,17 +1256,7 @@ fn an_owner_without_a_snapshot_is_read_state_by_state() {
     ]);
     let exporter = Proc::spawn(&mut ex);
     exporter.wait_line("ready bridge hostfo: exporting 1 state(s)", PATIENCE);
-    let importer = Proc::spawn(link.conductor(1, &b).args(importer_args(
-        "hostfb",
-        &[
-            "--connect",
-            &link.endpoint(0),
-            "--listen",
-            &link.endpoint(1),
-        ],
-        &a,
-    )));
-    importer.wait_line("ready bridge hostfb", PATIENCE);
+    let importer = start_importer(&link, &b, "hostfb", &a);
     wait_listed(&bus_b, "fo/x", PATIENCE);
     let mut mirror = StateSubscriber::with_buffer(&bus_b, "fo/x", 256).unwrap();
     let mut got = Vec::new();
