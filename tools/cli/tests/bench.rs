@@ -231,3 +231,70 @@ fn quick_bench_writes_a_table_json_and_plots() {
     assert_eq!(String::from_utf8_lossy(&run.stdout).trim(), md.trim());
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// `conductor bench --bridge --quick` over loopback: raw Zenoh read three ways, the bridge path
+/// read three ways, the local bus twice, and a load run, all in one well-formed report. The
+/// figures are not checked (they depend on the machine), only that each path was measured and
+/// that the load run's counts add up.
+#[test]
+fn quick_bridge_bench_measures_every_path_and_counts_the_load() {
+    let out = std::env::temp_dir().join(format!(
+        "conductor-bench-bridge-test-{}",
+        std::process::id()
+    ));
+    let _ = std::fs::remove_dir_all(&out);
+    let run = Command::new(env!("CARGO_BIN_EXE_conductor"))
+        .args(["bench", "--bridge", "--quick", "--bridge-loopback"])
+        .args([
+            "--bridge-states",
+            "50",
+            "--seconds",
+            "1",
+            "--no-progress",
+            "-o",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "conductor bench --bridge --quick failed:\n{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let r: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("bridge.json")).unwrap()).unwrap();
+    assert!(r["link"].as_str().unwrap().starts_with("loopback"), "{r}");
+    for path in [
+        "zenoh_us",
+        "zenoh_woken_us",
+        "zenoh_poll_us",
+        "bridge_on_bus_us",
+        "bridge_woken_us",
+        "bridge_us",
+        "local_woken_us",
+        "local_us",
+    ] {
+        let (p50, p99) = (r[path][0].as_f64(), r[path][1].as_f64());
+        assert!(
+            matches!((p50, p99), (Some(a), Some(b)) if a > 0.0 && a <= b),
+            "{path} not measured: {}",
+            r[path]
+        );
+    }
+    let (published, received) = (
+        r["published"].as_u64().unwrap(),
+        r["received"].as_u64().unwrap(),
+    );
+    assert!(
+        published > 0 && received > 0 && received <= published,
+        "load run: {received} of {published}"
+    );
+    let md = std::fs::read_to_string(out.join("bridge.md")).unwrap();
+    for row in [
+        "raw Zenoh pub/sub: reader woken by the channel",
+        "bridge: reader on B busy-polling",
+    ] {
+        assert!(md.contains(row), "no {row:?} row in\n{md}");
+    }
+    let _ = std::fs::remove_dir_all(&out);
+}
