@@ -137,6 +137,7 @@ impl Helper {
         self.child.id()
     }
 
+    /// SIGINT (a bridge's orderly stop), then at most 10 s before the kill of `drop`.
     fn stop(mut self) {
         // SAFETY: kill(2) on our own child's pid.
         unsafe { libc::kill(self.child.id() as i32, libc::SIGINT) };
@@ -144,6 +145,13 @@ impl Helper {
         while self.child.try_wait().ok().flatten().is_none() && Instant::now() < end {
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+}
+
+/// A run that fails half-way does not leave its helpers (bridges spinning, Zenoh sessions)
+/// running after it.
+impl Drop for Helper {
+    fn drop(&mut self) {
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
