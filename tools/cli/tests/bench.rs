@@ -8,7 +8,8 @@
 
 use std::collections::BTreeSet;
 use std::path::Path;
-use std::process::Command;
+
+mod support;
 
 use conductor_benches::suite::{cyclictest, plots, Reader, QUICK_RATES, STATES};
 use serde_json::Value;
@@ -65,18 +66,7 @@ fn quantiles_ok(v: &Value, what: &str) {
 
 #[test]
 fn quick_bench_writes_a_table_json_and_plots() {
-    let out = std::env::temp_dir().join(format!("conductor-bench-test-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
-    let run = Command::new(env!("CARGO_BIN_EXE_conductor"))
-        .args(["bench", "--quick", "--no-progress", "--no-install", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "conductor bench --quick failed:\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let (out, run) = support::bench("bench", &["--quick", "--no-install"]);
 
     // JSON: parses, and holds a row for every configured rate × state count.
     let text = std::fs::read_to_string(out.join("report.json")).unwrap();
@@ -238,28 +228,17 @@ fn quick_bench_writes_a_table_json_and_plots() {
 /// that the load run's counts add up.
 #[test]
 fn quick_bridge_bench_measures_every_path_and_counts_the_load() {
-    let out = std::env::temp_dir().join(format!(
-        "conductor-bench-bridge-test-{}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&out);
-    let run = Command::new(env!("CARGO_BIN_EXE_conductor"))
-        .args(["bench", "--bridge", "--quick", "--bridge-loopback"])
-        .args([
+    let (out, _) = support::bench(
+        "bench-bridge",
+        &[
+            "--bridge",
+            "--quick",
+            "--bridge-loopback",
             "--bridge-states",
             "50",
             "--seconds",
             "1",
-            "--no-progress",
-            "-o",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "conductor bench --bridge --quick failed:\n{}",
-        String::from_utf8_lossy(&run.stderr)
+        ],
     );
     let r: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("bridge.json")).unwrap()).unwrap();

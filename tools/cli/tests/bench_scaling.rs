@@ -8,7 +8,8 @@
 //! suite's test (test binaries run one after another).
 
 use std::path::Path;
-use std::process::Command;
+
+mod support;
 
 use conductor_benches::suite::scaling::{
     Plan, BASE_STATES, QUICK_EXECUTORS, QUICK_STATES, QUICK_SUBSCRIBERS,
@@ -50,18 +51,7 @@ fn fit_matches(json: &Value, pts: &[(f64, f64)], what: &str) {
 
 #[test]
 fn quick_scaling_writes_points_fits_and_curves() {
-    let out = std::env::temp_dir().join(format!("conductor-scaling-test-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&out);
-    let run = Command::new(env!("CARGO_BIN_EXE_conductor"))
-        .args(["bench", "--scaling", "--quick", "--no-progress", "-o"])
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "conductor bench --scaling --quick failed:\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    let (out, run) = support::bench("scaling", &["--scaling", "--quick"]);
 
     let j: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();

@@ -14,6 +14,27 @@ use serde_json::Value;
 
 pub use conductor_testkit::workspace;
 
+/// Runs `conductor bench ARGS --no-progress -o <a fresh directory>`; fails with its stderr
+/// unless it succeeded. Returns the directory and what the run printed.
+pub fn bench(tag: &str, args: &[&str]) -> (PathBuf, Output) {
+    let out = std::env::temp_dir().join(format!("conductor-{tag}-test-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let run = Command::new(env!("CARGO_BIN_EXE_conductor"))
+        .arg("bench")
+        .args(args)
+        .args(["--no-progress", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "conductor bench {} failed:\n{}",
+        args.join(" "),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    (out, run)
+}
+
 /// `conductor --domain <d>`.
 pub fn conductor(d: &Domain) -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_conductor"));
