@@ -105,6 +105,17 @@ pub fn hold_wakeup_latency(max_us: i32) -> Result<(), RtProblem> {
     Ok(())
 }
 
+/// The CPUs the calling thread may run on, in order.
+pub fn usable_cpus() -> Vec<usize> {
+    let mut ids: Vec<usize> = core_affinity::get_core_ids()
+        .unwrap_or_default()
+        .iter()
+        .map(|c| c.id)
+        .collect();
+    ids.sort_unstable();
+    ids
+}
+
 /// Pins the calling thread to `cpu`.
 pub fn pin_to_cpu(cpu: usize) -> Result<(), RtProblem> {
     let ids = core_affinity::get_core_ids().unwrap_or_default();

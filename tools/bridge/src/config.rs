@@ -3,6 +3,7 @@
 //! ```toml
 //! host = "robot"                # this bridge's name on Zenoh (default: the machine's host name)
 //! heartbeat_ms = 50             # liveness period; importers mark states STALE after 2 missed
+//! cpus = [2, 3]                 # CPUs it runs on (default: all but the manifest's executors')
 //!
 //! [zenoh]
 //! mode = "peer"                 # "peer" (default) or "client" (through a zenohd router)
@@ -57,6 +58,14 @@ pub struct BridgeConfig {
     /// What this host imports.
     #[serde(default)]
     pub import: Vec<ImportConfig>,
+    /// CPUs the whole bridge process runs on (every thread, Zenoh's included). Default: any CPU
+    /// it may use except those the manifest pins executors to (`[subsystems.*] cpu`), unless
+    /// that leaves none. See [`crate::cpus`].
+    pub cpus: Option<Vec<usize>>,
+    /// CPUs the manifest's executors are pinned to (read by [`Self::from_manifest`]): kept free
+    /// when `cpus` is not given.
+    #[serde(skip)]
+    pub executor_cpus: Vec<usize>,
 }
 
 /// The Zenoh side.
@@ -95,7 +104,7 @@ pub struct ExportConfig {
     /// Busy-wait of the export thread before each expected tick (µs, at most [`MAX_SPIN_US`];
     /// 0, the default, turns it off): a tick that arrives while it spins leaves without a
     /// thread wake-up, and the thread yields after each put so Zenoh's TX thread sends at once
-    /// (≈ 20–25 µs less latency at p50 on a VM), for up to `spin_us` × tick rate of a CPU. See
+    /// (≈ 4–25 µs less latency at p50 on a VM), for up to `spin_us` × tick rate of a CPU. See
     /// the crate README.
     #[serde(default = "default_spin_us")]
     pub spin_us: u64,
@@ -191,7 +200,20 @@ impl BridgeConfig {
         let c: Doc = toml::Table::from_iter([("bridge".to_string(), b.clone())])
             .try_into()
             .map_err(|e: toml::de::Error| BridgeError::Config(format!("[bridge]: {e}")))?;
-        let c = c.bridge.expect("present");
+        let mut c = c.bridge.expect("present");
+        // Only the executors' `cpu`s: the rest of each subsystem is validated by its executor.
+        if let Some(subs) = doc.get("subsystems").and_then(toml::Value::as_table) {
+            for s in subs.values() {
+                if let Some(cpu) = s.get("cpu").and_then(toml::Value::as_integer) {
+                    if let Ok(cpu) = usize::try_from(cpu) {
+                        if !c.executor_cpus.contains(&cpu) {
+                            c.executor_cpus.push(cpu);
+                        }
+                    }
+                }
+            }
+            c.executor_cpus.sort_unstable();
+        }
         c.check()?;
         Ok(Some(c))
     }
@@ -208,6 +230,9 @@ impl BridgeConfig {
         }
         if self.heartbeat_ms == Some(0) {
             return bad("heartbeat_ms must be at least 1".into());
+        }
+        if self.cpus.as_ref().is_some_and(Vec::is_empty) {
+            return bad("cpus = []: give at least one CPU, or leave cpus out".into());
         }
         if let Some(m) = &self.zenoh.mode {
             if m != "peer" && m != "client" {
@@ -396,5 +421,33 @@ states = ["leg/*"]
         let c = BridgeConfig::from_manifest(m).unwrap().unwrap();
         assert_eq!(c.export.unwrap().states, vec!["leg/*".to_string()]);
         assert_eq!(BridgeConfig::from_manifest("system = \"x\"").unwrap(), None);
+    }
+
+    #[test]
+    fn a_manifests_bridge_keeps_off_its_executors_cpus_unless_told_where_to_run() {
+        let m = r#"
+system = "x"
+[subsystems.leg]
+rate_hz = 100
+cpu = 1
+[subsystems.arm]
+rate_hz = 100
+cpu = 0
+[subsystems.head]
+rate_hz = 10
+[bridge.export]
+states = ["leg/*"]
+"#;
+        let c = BridgeConfig::from_manifest(m).unwrap().unwrap();
+        assert_eq!(c.executor_cpus, vec![0, 1]);
+        assert_eq!(c.cpus, None);
+        let told = m.replace("[bridge.export]", "[bridge]\ncpus = [3]\n[bridge.export]");
+        let c = BridgeConfig::from_manifest(&told).unwrap().unwrap();
+        assert_eq!(c.cpus, Some(vec![3]));
+        // A bridge.toml has no executors.
+        let c = BridgeConfig::from_toml("cpus = [2]\n[export]\nstates = [\"*\"]").unwrap();
+        assert_eq!((c.cpus, c.executor_cpus), (Some(vec![2]), vec![]));
+        let e = BridgeConfig::from_toml("cpus = []\n[export]\nstates = [\"*\"]").unwrap_err();
+        assert!(e.to_string().contains("cpus = []"), "{e}");
     }
 }

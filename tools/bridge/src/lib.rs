@@ -2,6 +2,7 @@
 
 pub mod config;
 pub mod counters;
+pub mod cpus;
 pub mod error;
 mod export;
 mod import;
@@ -67,6 +68,8 @@ pub fn run(
     ready: impl FnOnce(&Ready),
 ) -> Result<Arc<Counters>> {
     cfg.check()?;
+    // Before Zenoh starts its threads, so they inherit the CPUs.
+    let placed = cpus::place(cfg)?;
     let host = cfg.host();
     let session = session_id();
     let heartbeat = Duration::from_millis(cfg.heartbeat_ms());
@@ -79,6 +82,9 @@ pub fn run(
         domain.name(),
         zs.zid()
     );
+    if let Some(p) = placed {
+        info!("bridge {host}: {p}");
+    }
 
     let (up_tx, up_rx) = mpsc::channel::<Result<(usize, usize)>>();
     let mut threads = Vec::new();

@@ -129,6 +129,7 @@ pub fn run_bridge(a: &BenchArgs) -> Result<()> {
         latency_hz: 1000.0,
         loopback: a.bridge_loopback,
         spin_us: a.bridge_spin_us,
+        unpinned: a.bridge_unpinned,
     };
     let r = crate::bench_bridge::run(&o)?;
     let md = r.markdown();

@@ -52,6 +52,8 @@ pub struct Options {
     pub loopback: bool,
     /// The exporting bridge's `--spin-us` (`None`: its default).
     pub spin_us: Option<u64>,
+    /// Leave the publisher and the exporting bridge wherever the scheduler puts them.
+    pub unpinned: bool,
 }
 
 fn err(m: impl Into<String>) -> CliError {
@@ -203,10 +205,15 @@ fn publisher(
     subsystem: &str,
     n: usize,
     rate: f64,
+    cpu: Option<usize>,
     stop: Arc<AtomicBool>,
 ) -> std::thread::JoinHandle<Result<u64>> {
     let (d, subsystem) = (d.clone(), subsystem.to_string());
     std::thread::spawn(move || {
+        if let Some(c) = cpu {
+            // Where an executor runs: on its own CPU.
+            conductor_bus::rt::pin_to_cpu(c).map_err(|p| err(p.what))?;
+        }
         let bus = Bus::open(&d, "bench-publisher")?;
         let mut p = StatePublisher::create(&bus, &subsystem, &specs(n, rate))?;
         let period = Duration::from_secs_f64(1.0 / rate);
@@ -236,7 +243,7 @@ fn bridge(
     d: &Domain,
     remote: &Domain,
     export: &str,
-    spin_us: Option<u64>,
+    o: &Options,
 ) -> Result<Helper> {
     let mut c = sides.command(i)?;
     c.arg("--domain").arg(d.name()).arg("bridge");
@@ -244,8 +251,12 @@ fn bridge(
     c.arg("--listen").arg(sides.endpoint(i));
     if i == 0 {
         c.args(["--export", export]);
-        if let Some(us) = spin_us {
+        if let Some(us) = o.spin_us {
             c.arg("--spin-us").arg(us.to_string());
+        }
+        if let Some((_, cpus)) = placement(o) {
+            let cpus: Vec<String> = cpus.iter().map(|c| c.to_string()).collect();
+            c.arg("--cpus").arg(cpus.join(","));
         }
     } else {
         c.arg("--connect").arg(sides.endpoint(0));
@@ -254,6 +265,17 @@ fn bridge(
     let h = Helper::spawn(c)?;
     h.line("ready bridge", Duration::from_secs(180))?;
     Ok(h)
+}
+
+/// Where A's side runs, unless `--bridge-unpinned` or one CPU: the publisher, standing for
+/// an executor, on the first CPU; the exporting bridge on the others, as a launched manifest
+/// places it (off its executors' CPUs).
+fn placement(o: &Options) -> Option<(usize, Vec<usize>)> {
+    let cpus = conductor_bus::rt::usable_cpus();
+    match cpus.split_first() {
+        Some((&first, rest)) if !o.unpinned && !rest.is_empty() => Some((first, rest.to_vec())),
+        _ => None,
+    }
 }
 
 fn wait_listed(bus: &Bus, name: &str) -> Result<()> {
@@ -366,6 +388,9 @@ pub struct Report {
     pub link: String,
     /// The exporting bridge's spin (µs; `None`: its default).
     pub spin_us: Option<u64>,
+    /// Where the publisher and the exporting bridge ran (`None`: wherever the scheduler put
+    /// them).
+    pub placement: Option<String>,
     /// Every CPU was held out of deep idle states for the run (`/dev/cpu_dma_latency` at 0), as
     /// on a host whose executor runs (it holds the same while it lives): both raw Zenoh and the
     /// bridges wake from the same idle states. `false` when that could not be had (not root).
@@ -429,8 +454,12 @@ impl Report {
         } else {
             "deep idle states allowed"
         };
+        let placed = self
+            .placement
+            .clone()
+            .unwrap_or_else(|| "publisher and bridges unpinned".into());
         format!(
-            "### Bridge ({link}; export spin {spin}; {idle})\n\n\
+            "### Bridge ({link}; export spin {spin}; {placed}; {idle})\n\n\
              | path | p50 µs | p99 µs | p50 vs raw Zenoh (callback) | p50 / p99 vs raw Zenoh read \
              the same way |\n|---|---|---|---|---|\n\
              {}{}{}{}{}{}{}{}\n\
@@ -518,10 +547,11 @@ pub fn run(o: &Options) -> Result<Report> {
     // 2. Through the bridges, beside the local bus.
     let a = Domain::unique("bbench-a")?;
     let b = Domain::unique("bbench-b")?;
-    let ex = bridge(&sides, 0, &a, &b, "lat/*", o.spin_us)?;
-    let im = bridge(&sides, 1, &b, &a, "", None)?;
+    let ex = bridge(&sides, 0, &a, &b, "lat/*", o)?;
+    let im = bridge(&sides, 1, &b, &a, "", o)?;
     let stop = Arc::new(AtomicBool::new(false));
-    let p = publisher(&a, "lat", 1, o.latency_hz, stop.clone());
+    let pub_cpu = placement(o).map(|p| p.0);
+    let p = publisher(&a, "lat", 1, o.latency_hz, pub_cpu, stop.clone());
     let bus_a = Bus::open(&a, "bench-a")?;
     let bus_b = Bus::open(&b, "bench-b")?;
     wait_listed(&bus_b, "lat/s0")?;
@@ -581,11 +611,11 @@ pub fn run(o: &Options) -> Result<Report> {
     let a = Domain::unique("bbload-a")?;
     let b = Domain::unique("bbload-b")?;
     let stop = Arc::new(AtomicBool::new(false));
-    let p = publisher(&a, "load", o.states, o.rate_hz, stop.clone());
+    let p = publisher(&a, "load", o.states, o.rate_hz, pub_cpu, stop.clone());
     let bus_a = Bus::open(&a, "bench-a")?;
     wait_listed(&bus_a, &format!("load/s{}", o.states - 1))?;
-    let ex = bridge(&sides, 0, &a, &b, "load/*", o.spin_us)?;
-    let im = bridge(&sides, 1, &b, &a, "", None)?;
+    let ex = bridge(&sides, 0, &a, &b, "load/*", o)?;
+    let im = bridge(&sides, 1, &b, &a, "", o)?;
     let bus_b = Bus::open(&b, "bench-b")?;
     wait_listed(&bus_b, &format!("load/s{}", o.states - 1))?;
     let mut subs = bus_b
@@ -651,6 +681,13 @@ pub fn run(o: &Options) -> Result<Report> {
     Ok(Report {
         link: sides.describe().into(),
         spin_us: o.spin_us,
+        placement: placement(o).map(|(p, b)| {
+            let b: Vec<String> = b.iter().map(|c| c.to_string()).collect();
+            format!(
+                "publisher on CPU {p}, exporting bridge on CPU(s) {}",
+                b.join(", ")
+            )
+        }),
         deep_idle_off,
         local_us,
         zenoh_us,

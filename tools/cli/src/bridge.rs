@@ -31,6 +31,9 @@ pub fn config(args: &BridgeArgs) -> Result<BridgeConfig> {
     if args.heartbeat_ms.is_some() {
         c.heartbeat_ms = args.heartbeat_ms;
     }
+    if !args.cpus.is_empty() {
+        c.cpus = Some(args.cpus.clone());
+    }
     c.zenoh.listen.extend(args.listen.iter().cloned());
     c.zenoh.connect.extend(args.connect.iter().cloned());
     if args.zenoh_config.is_some() {

@@ -263,6 +263,10 @@ pub struct BridgeArgs {
     /// less latency for up to this × tick rate of a CPU [default: 0].
     #[arg(long, value_name = "US")]
     pub spin_us: Option<u64>,
+    /// CPUs the bridge runs on, e.g. `1,2` [default: all but the CPUs the manifest pins its
+    /// executors to].
+    #[arg(long, value_name = "CPUS", value_delimiter = ',')]
+    pub cpus: Vec<usize>,
     /// A Zenoh JSON5 configuration applied first (TLS, access control).
     #[arg(long, value_name = "FILE")]
     pub zenoh_config: Option<PathBuf>,
@@ -527,6 +531,11 @@ pub struct BenchArgs {
     /// The exporting bridge's `--spin-us` in the bridge benchmark [default: the bridge's].
     #[arg(long, value_name = "US")]
     pub bridge_spin_us: Option<u64>,
+    /// In the bridge benchmark, leave the publisher and the exporting bridge wherever the
+    /// scheduler puts them [default: the publisher, standing for an executor, on the first CPU
+    /// and the exporting bridge on the others].
+    #[arg(long)]
+    pub bridge_unpinned: bool,
 }
 
 /// `conductor launch`.

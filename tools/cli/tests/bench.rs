@@ -243,6 +243,27 @@ fn quick_bridge_bench_measures_every_path_and_counts_the_load() {
     let r: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("bridge.json")).unwrap()).unwrap();
     assert!(r["link"].as_str().unwrap().starts_with("loopback"), "{r}");
+    // A's side placed as a launched manifest places it: the publisher (an executor) on the
+    // first CPU, the exporting bridge on the others.
+    let cpus = conductor_bus::rt::usable_cpus();
+    let placement = r["placement"].as_str();
+    if cpus.len() > 1 {
+        let rest: Vec<String> = cpus[1..].iter().map(|c| c.to_string()).collect();
+        assert_eq!(
+            placement,
+            Some(
+                format!(
+                    "publisher on CPU {}, exporting bridge on CPU(s) {}",
+                    cpus[0],
+                    rest.join(", ")
+                )
+                .as_str()
+            ),
+            "{r}"
+        );
+    } else {
+        assert_eq!(placement, None, "{r}");
+    }
     for path in [
         "zenoh_us",
         "zenoh_woken_us",

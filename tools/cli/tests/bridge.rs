@@ -741,13 +741,16 @@ fn launch_runs_and_supervises_the_bridge_of_a_manifest() {
     let b = Domain::unique("brlb").unwrap();
     let port = free_tcp_ports(1);
     let dir = tempdir("brlaunch");
+    let usable = conductor_bus::rt::usable_cpus();
+    let exec_cpu = usable[0];
     let m = dir.join("robot.toml");
     std::fs::write(
         &m,
         format!(
             "{}\n[bridge]\nhost = \"robot\"\n\n[bridge.zenoh]\nlisten = [\"tcp/127.0.0.1:{port}\"]\n\n\
              [bridge.export]\nstates = [\"leg/*\"]\ncommands = [\"leg/knee\"]\n",
-            manifest()
+            // The executor's CPU, which the bridge keeps off.
+            manifest().replace("[subsystems.leg]\n", &format!("[subsystems.leg]\ncpu = {exec_cpu}\n"))
         ),
     )
     .unwrap();
@@ -792,6 +795,21 @@ fn launch_runs_and_supervises_the_bridge_of_a_manifest() {
         .and_then(|r| r.split(')').next())
         .and_then(|p| p.parse().ok())
         .unwrap_or_else(|| panic!("no bridge pid in {}", log()));
+    // Every thread of the bridge, Zenoh's included, runs off the executor's CPU (where there is
+    // another one to run on).
+    let expected: Vec<usize> = if usable.len() > 1 {
+        usable[1..].to_vec()
+    } else {
+        usable.clone()
+    };
+    let threads = allowed_cpus(pid);
+    assert!(threads.len() > 3, "the bridge's threads: {threads:?}");
+    for (tid, cpus) in &threads {
+        assert_eq!(
+            cpus, &expected,
+            "thread {tid} of the bridge (executor on CPU {exec_cpu})"
+        );
+    }
     // SAFETY: kill(2) on the bridge the launcher (our child) started.
     unsafe { libc::kill(pid, libc::SIGKILL) };
     let mut mirror = StateSubscriber::with_buffer(&bus_b, "leg/knee", 64).unwrap();
@@ -809,6 +827,33 @@ fn launch_runs_and_supervises_the_bridge_of_a_manifest() {
     let out = launcher.stop();
     assert!(out.contains("bridge started"), "{out}");
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Each thread of process `pid`: its tid and the CPUs it may run on (`Cpus_allowed_list`).
+fn allowed_cpus(pid: i32) -> Vec<(String, Vec<usize>)> {
+    let mut out = Vec::new();
+    for t in std::fs::read_dir(format!("/proc/{pid}/task"))
+        .unwrap()
+        .flatten()
+    {
+        let Ok(status) = std::fs::read_to_string(t.path().join("status")) else {
+            continue;
+        };
+        let list = status
+            .lines()
+            .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+            .expect("a Cpus_allowed_list line")
+            .trim();
+        let mut cpus = Vec::new();
+        for part in list.split(',') {
+            match part.split_once('-') {
+                Some((a, b)) => cpus.extend(a.parse::<usize>().unwrap()..=b.parse().unwrap()),
+                None => cpus.push(part.parse().unwrap()),
+            }
+        }
+        out.push((t.file_name().to_string_lossy().into_owned(), cpus));
+    }
+    out
 }
 
 /// A host's catalog changes (its bridge restarted exporting more states) while a local
@@ -1284,4 +1329,20 @@ fn an_owner_without_a_snapshot_is_read_state_by_state() {
         assert_eq!(w[1].value, w[0].value + 1.0, "{:?} then {:?}", w[0], w[1]);
         assert!(w[1].t_sample_ns > w[0].t_sample_ns);
     }
+}
+
+/// A CPU the bridge may not use is refused before it starts, naming the ones it may.
+#[test]
+fn a_bridge_told_to_run_on_a_cpu_it_cannot_use_says_which_it_can() {
+    let d = Domain::unique("brcpu").unwrap();
+    let err = fails(conductor(&d).args(["bridge", "--export", "leg/*", "--cpus", "4095"]));
+    let usable: Vec<String> = conductor_bus::rt::usable_cpus()
+        .iter()
+        .map(|c| c.to_string())
+        .collect();
+    assert!(
+        err.contains("CPU 4095 is not available to this process")
+            && err.contains(&format!("it may use {}", usable.join(", "))),
+        "{err}"
+    );
 }
