@@ -86,7 +86,7 @@ pub const GATEWAY_KEYS: &[&str] = &[
 pub const VIEW_KEYS: &[&str] = &["listen", "clamp"];
 /// Keys of the `[bridge]` table (its contents are checked by `conductor bridge` itself, which
 /// the launcher runs with the manifest).
-pub const BRIDGE_KEYS: &[&str] = &["host", "heartbeat_ms", "zenoh", "export", "import"];
+pub const BRIDGE_KEYS: &[&str] = &["host", "heartbeat_ms", "cpus", "zenoh", "export", "import"];
 /// Top-level keys.
 pub const TOP_KEYS: &[&str] = &[
     "system",

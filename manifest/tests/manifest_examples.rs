@@ -268,3 +268,15 @@ writable = true
         "{e}"
     );
 }
+
+#[test]
+fn the_two_host_robots_bridge_table_validates_with_every_key_the_bridge_reads() {
+    let rel = "deploy/two-host/robot.toml";
+    let src = std::fs::read_to_string(root().join(rel)).unwrap();
+    let m = load(rel);
+    assert!(m.bridge.is_some(), "{rel} has a [bridge] table");
+    // `cpus` is the one top-level bridge key the example leaves out.
+    let with_cpus = src.replacen("[bridge]\n", "[bridge]\ncpus = [0]\n", 1);
+    assert_ne!(with_cpus, src);
+    Manifest::parse(&with_cpus, rel).unwrap_or_else(|e| panic!("{e}"));
+}
